@@ -1,0 +1,96 @@
+"""The conductor: Ø5.0 body, 10 mm long, with a Ø1.700 h6 journal 1.5 mm long (seed 000 Table 1).
+
+Frame: origin at the shoulder (where the journal meets the body), z along the
+body, the journal points to -z. The journal is a cylinder primitive (exact
+analytic contact with the bore boxes) plus a convex frustum mesh for the tip
+chamfer; the frustum's vertices lie on the journal radius, so its facets never
+stick out of the cylinder.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from sim.errors import ConfigError
+from sim.physics import PhysicsConfig
+from sim.tolerances import BODY_H6, JOURNAL_H6
+
+CONDUCTOR_RGBA = (0.80, 0.62, 0.25, 1.0)  # brass
+JOURNAL_RGBA = (0.85, 0.70, 0.35, 1.0)
+
+
+@dataclass(frozen=True)
+class ConductorConfig:
+    """Conductor dimensions [m] and material."""
+
+    body_length: float = 0.010
+    journal_length: float = 0.0015
+    tip_chamfer: float = 1e-4
+    """45 deg chamfer at the journal tip, leg length."""
+    density: float = 8500.0
+    """Brass [kg/m^3]."""
+    tip_facets: int = 48
+
+    def __post_init__(self) -> None:
+        if not 0 < self.tip_chamfer < self.journal_length / 2:
+            raise ConfigError(f"tip_chamfer {self.tip_chamfer} m must be in (0, journal_length/2)")
+        if self.body_length <= 0 or self.journal_length <= 0:
+            raise ConfigError("body_length and journal_length must be > 0")
+
+
+def _frustum_vertices(r_top: float, r_bottom: float, z_top: float, z_bottom: float, n: int):
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    top = np.c_[r_top * np.cos(a), r_top * np.sin(a), np.full(n, z_top)]
+    bot = np.c_[r_bottom * np.cos(a), r_bottom * np.sin(a), np.full(n, z_bottom)]
+    return np.r_[top, bot]
+
+
+def add_conductor_geoms(
+    spec: mujoco.MjSpec,
+    body: mujoco.MjsBody,
+    journal_diameter: float,
+    body_diameter: float,
+    config: ConductorConfig = ConductorConfig(),
+    physics: PhysicsConfig = PhysicsConfig(),
+    mesh_name: str = "journal_tip",
+) -> None:
+    """Add the conductor's geoms and sites to `body` (frame as in the module docstring)."""
+    for name, d, band in (("journal", journal_diameter, JOURNAL_H6), ("body", body_diameter, BODY_H6)):
+        if not band.min - 1e-12 <= d <= band.max + 1e-12:
+            raise ConfigError(f"{name} diameter {d} m outside its h6 band {band.min}..{band.max}")
+    r, c, lj, lb = journal_diameter / 2, config.tip_chamfer, config.journal_length, config.body_length
+    spec.add_mesh(
+        name=mesh_name,
+        uservert=_frustum_vertices(r, r - c, -lj + c, -lj, config.tip_facets).ravel().tolist(),
+    )
+    geoms = [
+        body.add_geom(name="body", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                      size=[body_diameter / 2, lb / 2, 0], pos=[0, 0, lb / 2], rgba=list(CONDUCTOR_RGBA)),
+        body.add_geom(name="journal", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                      size=[r, (lj - c) / 2, 0], pos=[0, 0, -(lj - c) / 2], rgba=list(JOURNAL_RGBA)),
+        body.add_geom(name="tip", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mesh_name,
+                      rgba=list(JOURNAL_RGBA)),
+    ]
+    for geom in geoms:
+        geom.density = config.density
+        physics.precision_contact(geom)
+    body.add_site(name="tip", pos=[0, 0, -lj], size=[1e-4, 0, 0], group=5)
+    body.add_site(name="shoulder", pos=[0, 0, 0], size=[1e-4, 0, 0], group=5)
+    body.add_site(name="top", pos=[0, 0, lb], size=[1e-4, 0, 0], group=5)
+
+
+def build_conductor_spec(
+    journal_diameter: float,
+    body_diameter: float,
+    config: ConductorConfig = ConductorConfig(),
+    physics: PhysicsConfig = PhysicsConfig(),
+) -> mujoco.MjSpec:
+    """MjSpec with one free body 'conductor' (free joint 'free')."""
+    spec = mujoco.MjSpec()
+    body = spec.worldbody.add_body(name="conductor")
+    body.add_freejoint(name="free")
+    add_conductor_geoms(spec, body, journal_diameter, body_diameter, config, physics)
+    return spec

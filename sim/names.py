@@ -1,0 +1,11 @@
+"""Name prefixes of the scene's parts (MjSpec.attach prefixes): one place for all of them."""
+
+ARM = "arm/"
+STEWART = "stewart/"
+PLATE = "plate/"
+TRAY = "tray/"
+
+
+def conductor(k: int) -> str:
+    """Prefix of conductor k (0-based)."""
+    return f"conductor{k}/"

@@ -1,0 +1,69 @@
+"""Solver and contact settings: the single source of truth for the timestep.
+
+Why these numbers: the journal/bore radial clearance is 0-8 um, so contact
+penetration must stay well below 1 um. MuJoCo's soft contact settles at a
+penetration ~ F * A * (1 - d) / (d * k) (A: inverse effective mass, d: solimp
+impedance, k: solref stiffness), so the precision contacts use an impedance
+close to 1 and the stiffest time constant the timestep allows (2 * dt).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+
+from sim.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """Global MuJoCo options of every serpar scene."""
+
+    timestep: float = 1e-4
+    """Physics step [s]. The only place the timestep is defined."""
+    iterations: int = 100
+    ls_iterations: int = 50
+    tolerance: float = 1e-10
+    ccd_tolerance: float = 1e-10
+    """Convex-collision tolerance [m]; the default 1e-6 is the size of the clearance."""
+    impratio: float = 1.0
+    precision_solimp: tuple[float, float, float, float, float] = (0.995, 0.99999, 2e-6, 0.5, 2.0)
+    """solimp of journal/bore contacts: full stiffness reached at 2 um penetration."""
+    precision_dampratio: float = 1.0
+    precision_friction: float = 0.2
+    """Sliding friction between journal and bore (steel on brass, dry-ish)."""
+
+    def __post_init__(self) -> None:
+        if not 1e-6 <= self.timestep <= 2e-3:
+            raise ConfigError(f"timestep {self.timestep} s outside the valid range 1e-6..2e-3 s")
+        if self.iterations < 1 or self.ls_iterations < 1:
+            raise ConfigError("iterations and ls_iterations must be >= 1")
+        d0, dw, width = self.precision_solimp[:3]
+        if not (0 < d0 <= dw < 1 and width > 0):
+            raise ConfigError(f"precision_solimp {self.precision_solimp} needs 0<d0<=dwidth<1, width>0")
+
+    @property
+    def precision_solref(self) -> tuple[float, float]:
+        """Stiffest stable contact time constant: MuJoCo clamps timeconst to >= 2 * timestep."""
+        return (2.0 * self.timestep, self.precision_dampratio)
+
+    def apply(self, spec: mujoco.MjSpec) -> None:
+        """Write the global options into a scene spec (children's options are ignored on attach)."""
+        opt = spec.option
+        opt.timestep = self.timestep
+        opt.iterations = self.iterations
+        opt.ls_iterations = self.ls_iterations
+        opt.tolerance = self.tolerance
+        opt.ccd_tolerance = self.ccd_tolerance
+        opt.impratio = self.impratio
+        opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+        opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+
+    def precision_contact(self, geom: mujoco.MjsGeom) -> None:
+        """Mark a geom as part of a micrometre-precision contact pair (journal or bore)."""
+        geom.solref = list(self.precision_solref)
+        geom.solimp = list(self.precision_solimp)
+        geom.friction = [self.precision_friction, 0.005, 0.0001]
+        geom.condim = 4
+        geom.priority = 1

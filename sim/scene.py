@@ -1,0 +1,175 @@
+"""The assembly cell, assembled in code from the per-object specs with MjSpec.attach.
+
+World frame = arm base frame (the Panda's link0). The Stewart base, the tray
+pedestal and the cameras are placed around it; the baseplate rides on the
+Stewart platform's fixture site.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from sim import names
+from sim.arm import ACTUATOR_NAMES, HOME_Q, JOINT_NAMES, build_arm_spec
+from sim.baseplate import BaseplateConfig, build_baseplate_spec
+from sim.cameras import DEFAULT_PAIRS, SENSOR_PIXELS, StereoPairConfig, add_stereo_pair
+from sim.conductor import ConductorConfig, build_conductor_spec
+from sim.errors import ConfigError
+from sim.physics import PhysicsConfig
+from sim.stewart import StewartConfig, build_stewart_spec, home_strokes
+from sim.tolerances import DISTRIBUTIONS, DrawnDiameters, draw_diameters
+from sim.tray import TrayConfig, build_tray_spec
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """Everything that defines one cell instance. Frozen; validated on construction."""
+
+    seed: int = 0
+    """Seeds the tolerance draws (hole and journal diameters)."""
+    n_conductors: int = 36
+    tolerance_distribution: str = "uniform"
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    baseplate: BaseplateConfig = field(default_factory=BaseplateConfig)
+    tray: TrayConfig = field(default_factory=TrayConfig)
+    conductor: ConductorConfig = field(default_factory=ConductorConfig)
+    stewart: StewartConfig = field(default_factory=StewartConfig)
+    stereo_pairs: tuple[StereoPairConfig, ...] = DEFAULT_PAIRS
+    stewart_base: tuple[float, float, float] = (0.60, 0.0, 0.0)
+    tray_position: tuple[float, float, float] = (0.60, 0.27, 0.0)
+    tray_height: float = 0.22
+    """Height of the tray's bottom face on its pedestal [m]."""
+    backlight_position: tuple[float, float, float] = (0.45, -0.17, 0.35)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool):
+            raise ConfigError(f"seed must be an integer, got {self.seed!r}")
+        if not 0 <= self.n_conductors <= self.tray.n_pockets:
+            raise ConfigError(f"n_conductors={self.n_conductors}: valid 0..{self.tray.n_pockets} (tray pockets)")
+        if self.tolerance_distribution not in DISTRIBUTIONS:
+            raise ConfigError(f"tolerance_distribution {self.tolerance_distribution!r}; "
+                              f"valid: {', '.join(DISTRIBUTIONS)}")
+
+    def draw_diameters(self) -> DrawnDiameters:
+        return draw_diameters(self.seed, self.baseplate.n_holes, self.n_conductors,
+                              self.tolerance_distribution)  # type: ignore[arg-type]
+
+
+def _add_environment(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
+    world = spec.worldbody
+    spec.visual.global_.offwidth, spec.visual.global_.offheight = SENSOR_PIXELS
+    spec.visual.quality.shadowsize = 4096
+    spec.visual.headlight.ambient = [0.25, 0.25, 0.25]
+    spec.visual.headlight.diffuse = [0.35, 0.35, 0.35]
+    spec.add_texture(name="grid", type=mujoco.mjtTexture.mjTEXTURE_2D,
+                     builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, rgb1=[0.42, 0.44, 0.46],
+                     rgb2=[0.38, 0.40, 0.42], width=512, height=512)
+    floor_mat = spec.add_material(name="floor")
+    floor_mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "grid"
+    floor_mat.texrepeat = [8, 8]
+    world.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[2, 2, 0.05], material="floor")
+    world.add_light(name="key", pos=[0.3, -0.4, 1.8], dir=[0.15, 0.2, -1], diffuse=[0.6, 0.6, 0.6],
+                    castshadow=True)
+    world.add_light(name="fill", pos=[1.2, 0.8, 1.5], dir=[-0.5, -0.4, -1], diffuse=[0.3, 0.3, 0.3],
+                    castshadow=False)
+    tx, ty, _ = cfg.tray_position
+    pedestal_h = cfg.tray_height
+    world.add_geom(name="tray_pedestal", type=mujoco.mjtGeom.mjGEOM_BOX,
+                   size=[0.05, 0.05, pedestal_h / 2], pos=[tx, ty, pedestal_h / 2],
+                   rgba=[0.35, 0.36, 0.38, 1])
+    bx, by, bz = cfg.backlight_position
+    # Diffuse backlight panel behind the in-hand inspection point: the journal is seen in silhouette.
+    world.add_geom(name="backlight", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.05, 0.002, 0.04],
+                   pos=[bx, by, bz], rgba=[1, 1, 1, 1], contype=0, conaffinity=0,
+                   material=_emissive(spec))
+    world.add_geom(name="backlight_post", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                   size=[0.008, (bz - 0.04) / 2, 0], pos=[bx, by + 0.01, (bz - 0.04) / 2],
+                   rgba=[0.3, 0.3, 0.32, 1])
+
+
+def _emissive(spec: mujoco.MjSpec) -> str:
+    mat = spec.add_material(name="backlight")
+    mat.emission = 1.0
+    mat.rgba = [1, 1, 1, 1]
+    return "backlight"
+
+
+def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, DrawnDiameters]:
+    """The whole cell as one MjSpec, plus the tolerance draw it was built with."""
+    diameters = cfg.draw_diameters()
+    spec = mujoco.MjSpec()
+    spec.modelname = "serpar_cell"
+    cfg.physics.apply(spec)
+    _add_environment(spec, cfg)
+    world = spec.worldbody
+    spec.attach(build_arm_spec(), prefix=names.ARM, frame=world.add_frame(pos=[0, 0, 0]))
+    spec.attach(build_stewart_spec(cfg.stewart, cfg.physics), prefix=names.STEWART,
+                frame=world.add_frame(pos=list(cfg.stewart_base)))
+    plate = build_baseplate_spec(diameters.holes, cfg.baseplate, cfg.physics)
+    fixture_site = spec.site(names.STEWART + "fixture")
+    spec.attach(plate, prefix=names.PLATE, site=fixture_site)
+    tx, ty, _ = cfg.tray_position
+    spec.attach(build_tray_spec(cfg.tray), prefix=names.TRAY,
+                frame=world.add_frame(pos=[tx, ty, cfg.tray_height]))
+    pockets = cfg.tray.pocket_centres().reshape(-1, 2)
+    # Shoulder 1 um above the support balls: no initial overlap.
+    top = cfg.tray_height + cfg.tray.thickness + cfg.tray.support_height + 1e-6
+    for k in range(cfg.n_conductors):
+        part = build_conductor_spec(diameters.journals[k], diameters.bodies[k], cfg.conductor, cfg.physics)
+        px, py = pockets[k]
+        spec.attach(part, prefix=names.conductor(k), frame=world.add_frame(pos=[tx + px, ty + py, top]))
+    for pair in cfg.stereo_pairs:
+        add_stereo_pair(spec, pair)
+    return spec, diameters
+
+
+@dataclass
+class Scene:
+    """A compiled cell: model, data and the ids looked up once after compile."""
+
+    config: SceneConfig
+    spec: mujoco.MjSpec
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    diameters: DrawnDiameters
+    arm_qpos_adr: np.ndarray
+    arm_dof_adr: np.ndarray
+    arm_actuators: np.ndarray
+    leg_actuators: np.ndarray
+    hole_sites: np.ndarray
+    conductor_bodies: np.ndarray
+
+    def reset(self) -> None:
+        """Home state: arm in its ready pose, Stewart at home, conductors in the tray."""
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[self.arm_qpos_adr] = HOME_Q
+        self.data.ctrl[self.leg_actuators] = home_strokes(self.config.stewart)
+        mujoco.mj_forward(self.model, self.data)
+        self.gravity_hold_arm()
+
+    def gravity_hold_arm(self) -> None:
+        """Arm motor torques = gravity + Coriolis bias (needs an up-to-date qfrc_bias)."""
+        self.data.ctrl[self.arm_actuators] = self.data.qfrc_bias[self.arm_dof_adr]
+
+    def camera_names(self) -> list[str]:
+        return [self.model.camera(i).name for i in range(self.model.ncam)]
+
+
+def build_scene(cfg: SceneConfig = SceneConfig()) -> Scene:
+    """Build, compile and reset the cell."""
+    spec, diameters = build_scene_spec(cfg)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    arm_joints = [model.joint(names.ARM + j) for j in JOINT_NAMES]
+    arm_adr = np.array([j.qposadr[0] for j in arm_joints])
+    arm_dof = np.array([j.dofadr[0] for j in arm_joints])
+    arm_act = np.array([model.actuator(names.ARM + a).id for a in ACTUATOR_NAMES])
+    legs = np.array([model.actuator(f"{names.STEWART}leg{i}").id for i in range(1, 7)])
+    holes = np.array([model.site(f"{names.PLATE}hole{k}").id for k in range(cfg.baseplate.n_holes)])
+    bodies = np.array([model.body(f"{names.conductor(k)}conductor").id for k in range(cfg.n_conductors)])
+    scene = Scene(cfg, spec, model, data, diameters, arm_adr, arm_dof, arm_act, legs, holes, bodies)
+    scene.reset()
+    return scene

@@ -1,0 +1,274 @@
+"""The 6-UPS Stewart platform (seed 000 §4.1, Table 2) built in code with MjSpec.
+
+Frames: the base frame has the base (universal) joint centres B_i at z = 0;
+the platform frame has its origin at the centre of the platform (spherical)
+joint plane, joints at (P_x, P_y, 0). Table 2 lists the platform at Z = 245 mm.
+
+Each leg is an open chain base -> cyl{i} (universal joint: hinges u{i}_a,
+u{i}_b) -> rod{i} (slide leg{i}, qpos = actuator stroke s_i). The spherical
+joint closes the loop as an equality ``connect`` loop{i} between the sites
+rod_end{i} and p_joint{i}: a ball constraint has no stop, so the seed's 30 deg
+upper-hinge limit is only checked kinematically (:func:`spherical_angles_deg`).
+Leg length joint-centre to joint-centre is L_i = l_min + s_i.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from functools import lru_cache
+
+import mujoco
+import numpy as np
+
+from assets import asset_path
+from sim.errors import ConfigError
+from sim.physics import PhysicsConfig
+
+N_LEGS = 6
+CYL_RGBA = (0.55, 0.56, 0.58, 1.0)  # anodised grey motor/cylinder housing
+ROD_RGBA = (0.20, 0.40, 0.80, 1.0)  # blue piston rod
+PLATFORM_RGBA = (0.80, 0.81, 0.83, 1.0)  # machined aluminium
+BASE_RGBA = (0.30, 0.30, 0.32, 1.0)
+
+
+@dataclass(frozen=True)
+class StewartConfig:
+    """Geometry, masses and leg servo of the Stewart platform (SI units)."""
+
+    l_min: float = 0.2468
+    """Leg length at zero stroke [m]; not in the seed, chosen so the stroke spans Z 240-290 mm."""
+    stroke: float = 0.0508
+    """Actuator stroke [m] (seed §4.1: 0 <= L_i <= 50.8 mm)."""
+    home_z: float = 0.265
+    """Height of the platform frame above the base frame at home [m] (about mid-stroke)."""
+    lower_hinge_limit_deg: float = 20.0
+    upper_hinge_limit_deg: float = 30.0
+    platform_mass: float = 2.94
+    """Aluminium disc r = 170 mm, t = 12 mm: 2700 kg/m^3 * pi r^2 t = 2.94 kg."""
+    cyl_mass: float = 0.20
+    rod_mass: float = 0.10
+    leg_armature: float = 12.0
+    """Reflected rotor inertia on each slide [kg]: J (2 pi / lead)^2, J = 5e-6 kg m^2, lead 4 mm."""
+    leg_kp: float = 8.0e5
+    """Servo stiffness [N/m]: omega_n = sqrt(kp / m_eff) ~ 2 pi 40 Hz for m_eff ~ 12.6 kg."""
+    leg_kv: float = 6.3e3
+    """Servo damping [N s/m]: 2 omega_n m_eff, i.e. critically damped."""
+    leg_ki: float = 4.0e7
+    """Integral gain [N/(m s)]: kp / ki = 20 ms; drives the gravity sag to zero like a real drive."""
+    leg_imax: float = 300.0
+    """Anti-windup clamp of the integral force [N]; static load per leg is ~ 6 N."""
+    leg_force_limit: float = 1000.0
+    """Peak actuator force [N]: ~150x the static load, typical of a 100-200 W electric cylinder."""
+    hinge_damping: float = 0.01
+    """Viscous friction of the universal-joint bearings [N m s/rad]."""
+    platform_radius: float = 0.17
+    platform_thickness: float = 0.012
+    base_radius: float = 0.17
+    base_thickness: float = 0.01
+
+    def __post_init__(self) -> None:
+        positive = ("l_min", "stroke", "platform_mass", "cyl_mass", "rod_mass", "leg_kp",
+                    "leg_force_limit", "platform_radius", "platform_thickness",
+                    "base_radius", "base_thickness")
+        for name in positive:
+            if not float(getattr(self, name)) > 0:
+                raise ConfigError(f"{name}={getattr(self, name)} must be > 0")
+        for name in ("leg_armature", "leg_kv", "leg_ki", "leg_imax", "hinge_damping"):
+            if not float(getattr(self, name)) >= 0:
+                raise ConfigError(f"{name}={getattr(self, name)} must be >= 0")
+        if not 0 < self.lower_hinge_limit_deg <= 90:
+            raise ConfigError(f"lower_hinge_limit_deg={self.lower_hinge_limit_deg}: valid 0 < x <= 90")
+        if not 0 < self.upper_hinge_limit_deg <= 90:
+            raise ConfigError(f"upper_hinge_limit_deg={self.upper_hinge_limit_deg}: valid 0 < x <= 90")
+        s_home = stroke_for_pose(np.array([0.0, 0.0, self.home_z]), np.array([1.0, 0, 0, 0]), self)
+        if not np.all((s_home > 0) & (s_home < self.stroke)):
+            raise ConfigError(f"home_z={self.home_z} m needs strokes inside (0, {self.stroke}) m, "
+                              f"got {np.round(s_home, 5)}")
+        # Routh-Hurwitz for m s^3 + kv s^2 + kp s + ki: the PID leg loop must be stable.
+        if self.leg_ki > 0 and not self.leg_kv * self.leg_kp > self.servo_mass * self.leg_ki:
+            raise ConfigError(f"unstable leg servo: need kv*kp > m_eff*ki "
+                              f"({self.leg_kv * self.leg_kp:.3g} <= {self.servo_mass * self.leg_ki:.3g})")
+
+    @property
+    def servo_mass(self) -> float:
+        """Mass the leg servo moves along its axis [kg]: armature, rod, a sixth of the platform."""
+        return self.leg_armature + self.rod_mass + self.platform_mass / N_LEGS
+
+    @property
+    def servo_natural_hz(self) -> float:
+        return float(np.sqrt(self.leg_kp / self.servo_mass) / (2 * np.pi))
+
+    @property
+    def servo_damping_ratio(self) -> float:
+        return float(self.leg_kv / (2 * np.sqrt(self.leg_kp * self.servo_mass)))
+
+    @property
+    def home_pos(self) -> np.ndarray:
+        return np.array([0.0, 0.0, self.home_z])
+
+
+@lru_cache(maxsize=1)
+def _read_joint_table() -> tuple[tuple[float, ...], ...]:
+    with asset_path("stewart", "joints.csv").open(newline="") as f:
+        rows = sorted(csv.DictReader(f), key=lambda r: int(r["leg"]))
+    if [int(r["leg"]) for r in rows] != list(range(1, N_LEGS + 1)):
+        raise ConfigError("assets/stewart/joints.csv must list legs 1..6 exactly once")
+    keys = ("px_mm", "py_mm", "bx_mm", "by_mm", "bz_mm")
+    return tuple(tuple(float(r[k]) for k in keys) for r in rows)
+
+
+def load_joint_table() -> tuple[np.ndarray, np.ndarray]:
+    """(P, B): 6x3 platform joints in the platform frame (z = 0) and base joints, in metres.
+
+    The CSV's pz (245 mm) is the Table 2 platform height, not part of the platform frame.
+    """
+    t = np.array(_read_joint_table()) * 1e-3  # mm -> m
+    p = np.column_stack([t[:, 0], t[:, 1], np.zeros(N_LEGS)])
+    return p, t[:, 2:5].copy()
+
+
+def _rotation(quat: np.ndarray) -> np.ndarray:
+    mat = np.zeros(9)
+    q = np.asarray(quat, dtype=float)
+    mujoco.mju_quat2Mat(mat, q / np.linalg.norm(q))
+    return mat.reshape(3, 3)
+
+
+def stroke_for_pose(pos: np.ndarray, quat: np.ndarray,
+                    cfg: StewartConfig | None = None) -> np.ndarray:
+    """Nominal inverse kinematics: s_i = |pos + R(quat) P_i - B_i| - l_min (quat is w,x,y,z)."""
+    l_min = (cfg or StewartConfig()).l_min
+    p, b = load_joint_table()
+    legs = np.asarray(pos, dtype=float) + p @ _rotation(quat).T - b
+    return np.linalg.norm(legs, axis=1) - l_min
+
+
+def home_strokes(cfg: StewartConfig = StewartConfig()) -> np.ndarray:
+    """Leg commands that hold the home pose (the model's qpos0 has them already)."""
+    return stroke_for_pose(cfg.home_pos, np.array([1.0, 0, 0, 0]), cfg)
+
+
+def _leg_frame(direction: np.ndarray) -> np.ndarray:
+    """Quaternion of a frame whose z is the leg axis and whose x is horizontal."""
+    z = direction / np.linalg.norm(direction)
+    x = np.cross([0.0, 0.0, 1.0], z)
+    x /= np.linalg.norm(x)  # legs are never vertical (62 mm horizontal offset)
+    rot = np.column_stack([x, np.cross(z, x), z])
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, rot.ravel())
+    return quat
+
+
+def build_stewart_spec(cfg: StewartConfig = StewartConfig(),
+                       physics: PhysicsConfig = PhysicsConfig()) -> mujoco.MjSpec:
+    """MjSpec of the platform at its home pose; qpos0 closes every loop exactly."""
+    spec = mujoco.MjSpec()
+    spec.modelname = "stewart"
+    spec.compiler.degree = False  # MjSpec defaults to degrees; every angle below is in radians
+    p, b = load_joint_table()
+    s_home = home_strokes(cfg)
+    no_contact = {"contype": 0, "conaffinity": 0}
+    cyl_len, rod_len = 0.16, 0.15  # visual: rod stays inside the cylinder over the full stroke
+
+    base = spec.worldbody.add_body(name="base")
+    base.add_geom(name="base_disc", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                  size=[cfg.base_radius, cfg.base_thickness / 2, 0],
+                  pos=[0, 0, -cfg.base_thickness / 2], rgba=BASE_RGBA)
+
+    lim = cfg.lower_hinge_limit_deg * np.pi / 180
+    for i in range(1, N_LEGS + 1):
+        length = cfg.l_min + s_home[i - 1]
+        direction = cfg.home_pos + p[i - 1] - b[i - 1]
+        cyl = base.add_body(name=f"cyl{i}", pos=b[i - 1], quat=_leg_frame(direction))
+        for suffix, axis in (("a", [1.0, 0, 0]), ("b", [0, 1.0, 0])):
+            # Cardan joint: the neutral axis is the home leg direction, limits about it.
+            cyl.add_joint(name=f"u{i}_{suffix}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis,
+                          range=[-lim, lim], limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+                          damping=cfg.hinge_damping)
+        cyl.add_geom(name=f"cyl{i}_geom", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                     fromto=[0, 0, 0, 0, 0, cyl_len], size=[0.02, 0, 0], mass=cfg.cyl_mass,
+                     rgba=CYL_RGBA, **no_contact)
+        rod = cyl.add_body(name=f"rod{i}", pos=[0, 0, length])
+        # ref = home stroke: the body is placed at s_home, so qpos0 = s_home closes the loop.
+        rod.add_joint(name=f"leg{i}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1.0],
+                      ref=s_home[i - 1], range=[0, cfg.stroke],
+                      limited=mujoco.mjtLimited.mjLIMITED_TRUE, armature=cfg.leg_armature)
+        rod.add_geom(name=f"rod{i}_geom", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                     fromto=[0, 0, -rod_len, 0, 0, 0], size=[0.008, 0, 0], mass=cfg.rod_mass,
+                     rgba=ROD_RGBA, **no_contact)
+        rod.add_site(name=f"rod_end{i}", size=[0.006, 0, 0], rgba=ROD_RGBA)
+
+    plat = spec.worldbody.add_body(name="platform", pos=cfg.home_pos)
+    plat.add_freejoint(name="platform_free")
+    plat.add_geom(name="platform_disc", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                  size=[cfg.platform_radius, cfg.platform_thickness / 2, 0],
+                  pos=[0, 0, cfg.platform_thickness / 2], mass=cfg.platform_mass,
+                  rgba=PLATFORM_RGBA)
+    plat.add_site(name="platform_centre", size=[0.004, 0, 0])
+    plat.add_site(name="fixture", pos=[0, 0, cfg.platform_thickness], size=[0.004, 0, 0])
+    for i in range(1, N_LEGS + 1):
+        plat.add_site(name=f"p_joint{i}", pos=p[i - 1], size=[0.005, 0, 0])
+
+    for i in range(1, N_LEGS + 1):
+        # Spherical joint as a stiff ball constraint between two coincident sites.
+        spec.add_equality(name=f"loop{i}", type=mujoco.mjtEq.mjEQ_CONNECT,
+                          objtype=mujoco.mjtObj.mjOBJ_SITE, name1=f"rod_end{i}",
+                          name2=f"p_joint{i}", solref=list(physics.precision_solref),
+                          solimp=list(physics.precision_solimp))
+        act = spec.add_actuator(name=f"leg{i}", target=f"leg{i}",
+                                trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        # PID with only the position input: one control per leg, kv acts as damping; imax
+        # clamps the integral state [m s], so the force clamp is divided by ki.
+        imax = cfg.leg_imax / cfg.leg_ki if cfg.leg_ki > 0 else -1
+        act.set_to_pid(kp=cfg.leg_kp, kv=cfg.leg_kv, ki=cfg.leg_ki if cfg.leg_ki > 0 else -1,
+                       imax=imax, ctrlspec=int(mujoco.mjtCtrlInput.mjINPUT_POS))
+        act.ctrlrange = [0, cfg.stroke]
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [-cfg.leg_force_limit, cfg.leg_force_limit]
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        spec.add_sensor(name=f"stroke{i}", type=mujoco.mjtSensor.mjSENS_JOINTPOS,
+                        objtype=mujoco.mjtObj.mjOBJ_JOINT, objname=f"leg{i}")
+    for name, kind in (("platform_pos", mujoco.mjtSensor.mjSENS_FRAMEPOS),
+                       ("platform_quat", mujoco.mjtSensor.mjSENS_FRAMEQUAT)):
+        spec.add_sensor(name=name, type=kind, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                        objname="platform_centre")
+    return spec
+
+
+def loop_site_ids(model: mujoco.MjModel, prefix: str = "") -> tuple[np.ndarray, np.ndarray]:
+    """Site ids (rod_end, p_joint) of the six loops; look them up once, outside step loops."""
+    def sid(name: str) -> int:
+        k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, prefix + name)
+        if k < 0:
+            raise ConfigError(f"site {prefix + name!r} not in the model; is prefix {prefix!r} right?")
+        return k
+    ends = np.array([sid(f"rod_end{i}") for i in range(1, N_LEGS + 1)])
+    joints = np.array([sid(f"p_joint{i}") for i in range(1, N_LEGS + 1)])
+    return ends, joints
+
+
+def loop_violation(model: mujoco.MjModel, data: mujoco.MjData, prefix: str = "",
+                   site_ids: tuple[np.ndarray, np.ndarray] | None = None) -> float:
+    """Largest gap between a rod end and its platform joint [m] (needs site_xpos up to date)."""
+    ends, joints = site_ids if site_ids is not None else loop_site_ids(model, prefix)
+    return float(np.max(np.linalg.norm(data.site_xpos[ends] - data.site_xpos[joints], axis=1)))
+
+
+def spherical_angles_deg(model: mujoco.MjModel, data: mujoco.MjData,
+                         cfg: StewartConfig = StewartConfig(), prefix: str = "") -> np.ndarray:
+    """Deflection of each spherical joint from its home leg direction, in the platform frame [deg].
+
+    The connect constraint has no stop; compare against cfg.upper_hinge_limit_deg.
+    """
+    p, b = load_joint_table()
+    home_dir = cfg.home_pos + p - b
+    home_dir /= np.linalg.norm(home_dir, axis=1, keepdims=True)
+    plat = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, prefix + "platform")
+    rot_plat = data.xmat[plat].reshape(3, 3)
+    out = np.empty(N_LEGS)
+    for i in range(N_LEGS):
+        rod = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"{prefix}rod{i + 1}")
+        axis_plat = rot_plat.T @ data.xmat[rod].reshape(3, 3)[:, 2]  # leg axis seen by the platform
+        out[i] = np.degrees(np.arccos(np.clip(axis_plat @ home_dir[i], -1.0, 1.0)))
+    return out
