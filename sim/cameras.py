@@ -48,8 +48,8 @@ class StereoPairConfig:
 
 
 TOP_PAIR = StereoPairConfig(
-    name="top", target=(0.60, 0.13, 0.28), centre=(0.60, 0.13, 0.86),
-    baseline_dir=(1.0, 0.0, 0.0), baseline=0.12, focal_length=0.012,
+    name="top", target=(0.60, 0.135, 0.27), centre=(0.60, 0.135, 0.92),
+    baseline_dir=(0.0, 1.0, 0.0), baseline=0.12, focal_length=0.012,
 )
 """Over the tray and the baseplate: finds conductors (step 1) and empty holes (step 2)."""
 INSPECT_PAIR = StereoPairConfig(
@@ -78,8 +78,9 @@ def add_stereo_pair(spec: mujoco.MjSpec, pair: StereoPairConfig) -> None:
     direction = np.array(pair.baseline_dir, dtype=float)
     direction /= np.linalg.norm(direction)
     view = target - centre
-    # Image "up" for a downward pair is world +y; for a horizontal pair it is world +z.
-    up_hint = np.array([0.0, 1.0, 0.0]) if abs(view[2]) > 0.7 * np.linalg.norm(view) else np.array([0.0, 0.0, 1.0])
+    # A downward pair has its long image side along the baseline (world y here: tray and plate
+    # side by side), image up = world -x; a horizontal pair keeps world +z up.
+    up_hint = np.array([-1.0, 0.0, 0.0]) if abs(view[2]) > 0.7 * np.linalg.norm(view) else np.array([0.0, 0.0, 1.0])
     for name, sign in zip(pair.camera_names(), (-0.5, 0.5)):
         pos = centre + sign * pair.baseline * direction
         cam = spec.worldbody.add_camera(name=name, pos=pos.tolist(),

@@ -30,6 +30,8 @@ class PhysicsConfig:
     impratio: float = 1.0
     precision_solimp: tuple[float, float, float, float, float] = (0.995, 0.99999, 2e-6, 0.5, 2.0)
     """solimp of journal/bore contacts: full stiffness reached at 2 um penetration."""
+    precision_timeconst: float | None = None
+    """solref time constant of journal/bore contacts [s]; None = 2 * timestep, the stiffest stable."""
     precision_dampratio: float = 1.0
     precision_friction: float = 0.2
     """Sliding friction between journal and bore (steel on brass, dry-ish)."""
@@ -39,14 +41,18 @@ class PhysicsConfig:
             raise ConfigError(f"timestep {self.timestep} s outside the valid range 1e-6..2e-3 s")
         if self.iterations < 1 or self.ls_iterations < 1:
             raise ConfigError("iterations and ls_iterations must be >= 1")
+        if self.precision_timeconst is not None and self.precision_timeconst < 2 * self.timestep:
+            raise ConfigError(f"precision_timeconst {self.precision_timeconst} s below 2*timestep "
+                              f"({2 * self.timestep} s): MuJoCo would clamp it")
         d0, dw, width = self.precision_solimp[:3]
         if not (0 < d0 <= dw < 1 and width > 0):
             raise ConfigError(f"precision_solimp {self.precision_solimp} needs 0<d0<=dwidth<1, width>0")
 
     @property
     def precision_solref(self) -> tuple[float, float]:
-        """Stiffest stable contact time constant: MuJoCo clamps timeconst to >= 2 * timestep."""
-        return (2.0 * self.timestep, self.precision_dampratio)
+        """Default: the stiffest stable time constant (MuJoCo clamps timeconst to >= 2 * timestep)."""
+        tc = 2.0 * self.timestep if self.precision_timeconst is None else self.precision_timeconst
+        return (tc, self.precision_dampratio)
 
     def apply(self, spec: mujoco.MjSpec) -> None:
         """Write the global options into a scene spec (children's options are ignored on attach)."""

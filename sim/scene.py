@@ -38,7 +38,8 @@ class SceneConfig:
     conductor: ConductorConfig = field(default_factory=ConductorConfig)
     stewart: StewartConfig = field(default_factory=StewartConfig)
     stereo_pairs: tuple[StereoPairConfig, ...] = DEFAULT_PAIRS
-    stewart_base: tuple[float, float, float] = (0.60, 0.0, 0.0)
+    stewart_base: tuple[float, float, float] = (0.60, 0.0, 0.01)
+    """Stewart base-joint plane in the world; its 10 mm base disc stands on the floor."""
     tray_position: tuple[float, float, float] = (0.60, 0.27, 0.0)
     tray_height: float = 0.22
     """Height of the tray's bottom face on its pedestal [m]."""
@@ -63,7 +64,8 @@ def _add_environment(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     spec.visual.global_.offwidth, spec.visual.global_.offheight = SENSOR_PIXELS
     spec.visual.quality.shadowsize = 4096
     spec.visual.headlight.ambient = [0.25, 0.25, 0.25]
-    spec.visual.headlight.diffuse = [0.35, 0.35, 0.35]
+    spec.visual.headlight.diffuse = [0.3, 0.3, 0.3]
+    spec.visual.headlight.specular = [0.05, 0.05, 0.05]
     spec.add_texture(name="grid", type=mujoco.mjtTexture.mjTEXTURE_2D,
                      builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, rgb1=[0.42, 0.44, 0.46],
                      rgb2=[0.38, 0.40, 0.42], width=512, height=512)
@@ -71,9 +73,9 @@ def _add_environment(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
     floor_mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "grid"
     floor_mat.texrepeat = [8, 8]
     world.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[2, 2, 0.05], material="floor")
-    world.add_light(name="key", pos=[0.3, -0.4, 1.8], dir=[0.15, 0.2, -1], diffuse=[0.6, 0.6, 0.6],
+    world.add_light(name="key", pos=[0.3, -0.4, 1.8], dir=[0.15, 0.2, -1], diffuse=[0.45, 0.45, 0.45],
                     castshadow=True)
-    world.add_light(name="fill", pos=[1.2, 0.8, 1.5], dir=[-0.5, -0.4, -1], diffuse=[0.3, 0.3, 0.3],
+    world.add_light(name="fill", pos=[1.2, 0.8, 1.5], dir=[-0.5, -0.4, -1], diffuse=[0.2, 0.2, 0.2],
                     castshadow=False)
     tx, ty, _ = cfg.tray_position
     pedestal_h = cfg.tray_height

@@ -10,6 +10,11 @@ joint closes the loop as an equality ``connect`` loop{i} between the sites
 rod_end{i} and p_joint{i}: a ball constraint has no stop, so the seed's 30 deg
 upper-hinge limit is only checked kinematically (:func:`spherical_angles_deg`).
 Leg length joint-centre to joint-centre is L_i = l_min + s_i.
+
+Table 2 as printed is architecture-singular (the six leg lines are dependent at
+every pose: with locked legs the platform has a self-motion and falls along it).
+``swap_legs12`` (default on) exchanges the platform and base columns of legs 1
+and 2, a likely misprint; see assets/stewart/README.md.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ from sim.physics import PhysicsConfig
 N_LEGS = 6
 CYL_RGBA = (0.55, 0.56, 0.58, 1.0)  # anodised grey motor/cylinder housing
 ROD_RGBA = (0.20, 0.40, 0.80, 1.0)  # blue piston rod
-PLATFORM_RGBA = (0.80, 0.81, 0.83, 1.0)  # machined aluminium
+PLATFORM_RGBA = (0.45, 0.47, 0.50, 1.0)  # grey anodised aluminium: the bright plate stands out
 BASE_RGBA = (0.30, 0.30, 0.32, 1.0)
 
 
@@ -44,26 +49,31 @@ class StewartConfig:
     """Height of the platform frame above the base frame at home [m] (about mid-stroke)."""
     lower_hinge_limit_deg: float = 20.0
     upper_hinge_limit_deg: float = 30.0
-    platform_mass: float = 2.94
-    """Aluminium disc r = 170 mm, t = 12 mm: 2700 kg/m^3 * pi r^2 t = 2.94 kg."""
+    swap_legs12: bool = True
+    """Exchange P and B of legs 1, 2 of Table 2 (misprint fix; False = singular table as printed)."""
+    platform_mass: float = 2.87
+    """Aluminium disc r = 130 mm, t = 20 mm: 2700 kg/m^3 * pi r^2 t = 2.87 kg."""
     cyl_mass: float = 0.20
     rod_mass: float = 0.10
-    leg_armature: float = 12.0
-    """Reflected rotor inertia on each slide [kg]: J (2 pi / lead)^2, J = 5e-6 kg m^2, lead 4 mm."""
-    leg_kp: float = 8.0e5
-    """Servo stiffness [N/m]: omega_n = sqrt(kp / m_eff) ~ 2 pi 40 Hz for m_eff ~ 12.6 kg."""
-    leg_kv: float = 6.3e3
-    """Servo damping [N s/m]: 2 omega_n m_eff, i.e. critically damped."""
-    leg_ki: float = 4.0e7
-    """Integral gain [N/(m s)]: kp / ki = 20 ms; drives the gravity sag to zero like a real drive."""
+    leg_armature: float = 25.0
+    """Reflected rotor inertia per slide [kg]: J (2 pi / lead)^2, J = 1.6e-5 kg m^2, lead 5 mm."""
+    leg_kp: float = 1.6e6
+    """Servo stiffness [N/m]: sqrt(kp / m) ~ 2 pi 40 Hz for the lightest leg-space mode (25.4 kg)."""
+    leg_kv: float = 1.28e4
+    """Servo damping [N s/m]: 2 omega_n m, critically damped for the lightest leg-space mode."""
+    leg_ki: float = 2.0e7
+    """Integral gain [N/(m s)]: removes the gravity sag; Routh margin 4 for the heaviest mode (250 kg)."""
     leg_imax: float = 300.0
     """Anti-windup clamp of the integral force [N]; static load per leg is ~ 6 N."""
     leg_force_limit: float = 1000.0
     """Peak actuator force [N]: ~150x the static load, typical of a 100-200 W electric cylinder."""
+    loop_solimp: tuple[float, float, float, float, float] = (0.9999, 0.99999, 1e-6, 0.5, 2.0)
+    """Impedance of the spherical-joint connects (solref comes from PhysicsConfig): with d0 =
+    0.995 (the contact setting) a step command opens the loops by 0.74 um, with 0.9999 by 0.17 um."""
     hinge_damping: float = 0.01
     """Viscous friction of the universal-joint bearings [N m s/rad]."""
-    platform_radius: float = 0.17
-    platform_thickness: float = 0.012
+    platform_radius: float = 0.13
+    platform_thickness: float = 0.020
     base_radius: float = 0.17
     base_thickness: float = 0.01
 
@@ -77,31 +87,36 @@ class StewartConfig:
         for name in ("leg_armature", "leg_kv", "leg_ki", "leg_imax", "hinge_damping"):
             if not float(getattr(self, name)) >= 0:
                 raise ConfigError(f"{name}={getattr(self, name)} must be >= 0")
-        if not 0 < self.lower_hinge_limit_deg <= 90:
-            raise ConfigError(f"lower_hinge_limit_deg={self.lower_hinge_limit_deg}: valid 0 < x <= 90")
-        if not 0 < self.upper_hinge_limit_deg <= 90:
-            raise ConfigError(f"upper_hinge_limit_deg={self.upper_hinge_limit_deg}: valid 0 < x <= 90")
+        d0, dw, width = self.loop_solimp[:3]
+        if not (0 < d0 <= dw < 1 and width > 0):
+            raise ConfigError(f"loop_solimp {self.loop_solimp} needs 0 < d0 <= dwidth < 1, width > 0")
+        for name in ("lower_hinge_limit_deg", "upper_hinge_limit_deg"):
+            if not 0 < getattr(self, name) <= 90:
+                raise ConfigError(f"{name}={getattr(self, name)}: valid range 0 < x <= 90")
         s_home = stroke_for_pose(np.array([0.0, 0.0, self.home_z]), np.array([1.0, 0, 0, 0]), self)
         if not np.all((s_home > 0) & (s_home < self.stroke)):
             raise ConfigError(f"home_z={self.home_z} m needs strokes inside (0, {self.stroke}) m, "
                               f"got {np.round(s_home, 5)}")
-        # Routh-Hurwitz for m s^3 + kv s^2 + kp s + ki: the PID leg loop must be stable.
-        if self.leg_ki > 0 and not self.leg_kv * self.leg_kp > self.servo_mass * self.leg_ki:
-            raise ConfigError(f"unstable leg servo: need kv*kp > m_eff*ki "
-                              f"({self.leg_kv * self.leg_kp:.3g} <= {self.servo_mass * self.leg_ki:.3g})")
-
-    @property
-    def servo_mass(self) -> float:
-        """Mass the leg servo moves along its axis [kg]: armature, rod, a sixth of the platform."""
-        return self.leg_armature + self.rod_mass + self.platform_mass / N_LEGS
+        sv = np.linalg.svd(_leg_jacobian(self, self.home_pos, np.eye(3)), compute_uv=False)
+        if sv[-1] < 1e-6 * sv[0]:  # the legs cannot hold the platform: a mechanism, not a robot
+            raise ConfigError(f"joint table is singular at home (sigma ratio {sv[-1] / sv[0]:.1e}); "
+                              "Table 2 as printed needs swap_legs12=True")
+        # Routh-Hurwitz for m s^3 + kv s^2 + kp s + ki, for every leg-space mode at home:
+        # the platform's poorly conditioned directions weigh ~20x more than the Z mode.
+        m_max = float(leg_space_masses(self)[-1])
+        if self.leg_ki > 0 and not self.leg_kv * self.leg_kp > m_max * self.leg_ki:
+            raise ConfigError(f"unstable leg servo: need kv*kp > m_max*ki with m_max={m_max:.1f} kg, "
+                              f"i.e. leg_ki < {self.leg_kv * self.leg_kp / m_max:.3g}")
 
     @property
     def servo_natural_hz(self) -> float:
-        return float(np.sqrt(self.leg_kp / self.servo_mass) / (2 * np.pi))
+        """Natural frequency of the lightest (fastest) leg-space mode [Hz]."""
+        return float(np.sqrt(self.leg_kp / leg_space_masses(self)[0]) / (2 * np.pi))
 
     @property
     def servo_damping_ratio(self) -> float:
-        return float(self.leg_kv / (2 * np.sqrt(self.leg_kp * self.servo_mass)))
+        """Damping ratio of the lightest leg-space mode (heavier modes are less damped)."""
+        return float(self.leg_kv / (2 * np.sqrt(self.leg_kp * leg_space_masses(self)[0])))
 
     @property
     def home_pos(self) -> np.ndarray:
@@ -118,30 +133,53 @@ def _read_joint_table() -> tuple[tuple[float, ...], ...]:
     return tuple(tuple(float(r[k]) for k in keys) for r in rows)
 
 
-def load_joint_table() -> tuple[np.ndarray, np.ndarray]:
+def load_joint_table(swap_legs12: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(P, B): 6x3 platform joints in the platform frame (z = 0) and base joints, in metres.
 
     The CSV's pz (245 mm) is the Table 2 platform height, not part of the platform frame.
+    swap_legs12 exchanges the platform/base xy of legs 1 and 2 (see the module docstring).
     """
     t = np.array(_read_joint_table()) * 1e-3  # mm -> m
     p = np.column_stack([t[:, 0], t[:, 1], np.zeros(N_LEGS)])
-    return p, t[:, 2:5].copy()
-
-
-def _rotation(quat: np.ndarray) -> np.ndarray:
-    mat = np.zeros(9)
-    q = np.asarray(quat, dtype=float)
-    mujoco.mju_quat2Mat(mat, q / np.linalg.norm(q))
-    return mat.reshape(3, 3)
+    b = t[:, 2:5].copy()
+    if swap_legs12:
+        p[:2, :2], b[:2, :2] = b[:2, :2].copy(), p[:2, :2].copy()
+    return p, b
 
 
 def stroke_for_pose(pos: np.ndarray, quat: np.ndarray,
                     cfg: StewartConfig | None = None) -> np.ndarray:
     """Nominal inverse kinematics: s_i = |pos + R(quat) P_i - B_i| - l_min (quat is w,x,y,z)."""
-    l_min = (cfg or StewartConfig()).l_min
-    p, b = load_joint_table()
-    legs = np.asarray(pos, dtype=float) + p @ _rotation(quat).T - b
-    return np.linalg.norm(legs, axis=1) - l_min
+    cfg = cfg or StewartConfig()
+    p, b = load_joint_table(cfg.swap_legs12)
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, np.asarray(quat, dtype=float) / np.linalg.norm(quat))
+    legs = np.asarray(pos, dtype=float) + p @ rot.reshape(3, 3).T - b
+    return np.linalg.norm(legs, axis=1) - cfg.l_min
+
+
+def _leg_jacobian(cfg: StewartConfig, pos: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    """d(stroke)/d(twist): rows (n_i, R P_i x n_i); twist = (origin velocity, angular velocity)."""
+    p, b = load_joint_table(cfg.swap_legs12)
+    rp = p @ rot.T
+    legs = pos + rp - b
+    n = legs / np.linalg.norm(legs, axis=1, keepdims=True)
+    return np.hstack([n, np.cross(rp, n)])
+
+
+def leg_space_masses(cfg: StewartConfig) -> np.ndarray:
+    """Sorted eigen-masses [kg] the six leg servos see at home: (J M^-1 J^T)^-1 + armature + rod.
+
+    J maps the platform twist (origin velocity, angular velocity) to stroke rates; M is the
+    disc's spatial inertia about the platform origin. Leg hinge inertias are neglected.
+    """
+    m, r, t = cfg.platform_mass, cfg.platform_radius, cfg.platform_thickness
+    c = np.array([[0, -t / 2, 0], [t / 2, 0, 0], [0, 0, 0]])  # skew of the COM offset (0, 0, t/2)
+    inertia = np.diag([m * (3 * r * r + t * t) / 12] * 2 + [m * r * r / 2]) - m * c @ c
+    mass = np.block([[m * np.eye(3), -m * c], [m * c, inertia]])
+    jac = _leg_jacobian(cfg, cfg.home_pos, np.eye(3))
+    lam = np.linalg.inv(jac @ np.linalg.solve(mass, jac.T))
+    return np.linalg.eigvalsh(lam) + cfg.leg_armature + cfg.rod_mass
 
 
 def home_strokes(cfg: StewartConfig = StewartConfig()) -> np.ndarray:
@@ -166,12 +204,12 @@ def build_stewart_spec(cfg: StewartConfig = StewartConfig(),
     spec = mujoco.MjSpec()
     spec.modelname = "stewart"
     spec.compiler.degree = False  # MjSpec defaults to degrees; every angle below is in radians
-    p, b = load_joint_table()
+    p, b = load_joint_table(cfg.swap_legs12)
     s_home = home_strokes(cfg)
     no_contact = {"contype": 0, "conaffinity": 0}
     cyl_len, rod_len = 0.16, 0.15  # visual: rod stays inside the cylinder over the full stroke
 
-    base = spec.worldbody.add_body(name="base")
+    base = spec.worldbody.add_body(name="base")  # static: the legs hang off it
     base.add_geom(name="base_disc", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                   size=[cfg.base_radius, cfg.base_thickness / 2, 0],
                   pos=[0, 0, -cfg.base_thickness / 2], rgba=BASE_RGBA)
@@ -215,7 +253,7 @@ def build_stewart_spec(cfg: StewartConfig = StewartConfig(),
         spec.add_equality(name=f"loop{i}", type=mujoco.mjtEq.mjEQ_CONNECT,
                           objtype=mujoco.mjtObj.mjOBJ_SITE, name1=f"rod_end{i}",
                           name2=f"p_joint{i}", solref=list(physics.precision_solref),
-                          solimp=list(physics.precision_solimp))
+                          solimp=list(cfg.loop_solimp))
         act = spec.add_actuator(name=f"leg{i}", target=f"leg{i}",
                                 trntype=mujoco.mjtTrn.mjTRN_JOINT)
         # PID with only the position input: one control per leg, kv acts as damping; imax
@@ -261,7 +299,7 @@ def spherical_angles_deg(model: mujoco.MjModel, data: mujoco.MjData,
 
     The connect constraint has no stop; compare against cfg.upper_hinge_limit_deg.
     """
-    p, b = load_joint_table()
+    p, b = load_joint_table(cfg.swap_legs12)
     home_dir = cfg.home_pos + p - b
     home_dir /= np.linalg.norm(home_dir, axis=1, keepdims=True)
     plat = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, prefix + "platform")

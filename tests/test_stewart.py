@@ -54,14 +54,40 @@ def _quat_angle(q1: np.ndarray, q2: np.ndarray) -> float:
     return float(2 * np.arccos(min(1.0, abs(float(q1 @ q2)))))
 
 
+def _jacobian(p: np.ndarray, b: np.ndarray, pos: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    rp = p @ rot.T
+    n = pos + rp - b
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    return np.hstack([n, np.cross(rp, n)])
+
+
 def test_joint_table_matches_seed_table2() -> None:
-    p, b = load_joint_table()
+    p, b = load_joint_table(swap_legs12=False)
     assert p.shape == b.shape == (N_LEGS, 3)
     np.testing.assert_allclose(p[0], [-0.0791608, -0.1381348, 0.0])
     np.testing.assert_allclose(b[2], [0.1447667, -0.0268462, 0.0])
-    # All six legs have the same horizontal offset at any pure-Z pose (symmetric design).
-    offsets = np.linalg.norm((p - b)[:, :2], axis=1)
-    np.testing.assert_allclose(offsets, offsets[0], rtol=1e-5)
+    pc, bc = load_joint_table()  # the correction only exchanges P and B of legs 1 and 2
+    np.testing.assert_array_equal(pc[:2, :2], b[:2, :2])
+    np.testing.assert_array_equal(bc[2:], b[2:])
+    for pp, bb in ((p, b), (pc, bc)):  # every leg has the same horizontal offset
+        offsets = np.linalg.norm((pp - bb)[:, :2], axis=1)
+        np.testing.assert_allclose(offsets, offsets[0], rtol=1e-5)
+
+
+def test_printed_table_is_architecture_singular_corrected_is_not() -> None:
+    """Table 2 as printed: the six leg lines are dependent at every pose; swapped: well posed."""
+    rng = np.random.default_rng(3)
+    printed, fixed = load_joint_table(swap_legs12=False), load_joint_table()
+    for _ in range(20):
+        pos = np.r_[rng.uniform(-0.03, 0.03, 2), rng.uniform(0.24, 0.29)]
+        quat = np.r_[1.0, rng.uniform(-0.04, 0.04, 3)]
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, quat / np.linalg.norm(quat))
+        for (p, b), bad in ((printed, True), (fixed, False)):
+            sv = np.linalg.svd(_jacobian(p, b, pos, rot.reshape(3, 3)), compute_uv=False)
+            assert (sv[-1] / sv[0] < 1e-7) == bad, sv
+    with pytest.raises(ConfigError, match="swap_legs12"):
+        StewartConfig(swap_legs12=False)
 
 
 def test_stroke_covers_seed_z_range() -> None:
@@ -150,7 +176,7 @@ def test_attach_keeps_actuators_equalities_sensors() -> None:
     assert loop_violation(model, data, prefix="stewart/") < 1e-9
     np.testing.assert_allclose(data.sensor("stewart/platform_pos").data, [0.6, 0, CFG.home_z], atol=1e-12)
     data.ctrl[:] = home_strokes(CFG)
-    for _ in range(2000):
+    for _ in range(5000):
         mujoco.mj_step(model, data)
     assert loop_violation(model, data, prefix="stewart/") <= 1e-6
     np.testing.assert_allclose(data.sensor("stewart/platform_pos").data, [0.6, 0, CFG.home_z], atol=1e-5)

@@ -1,0 +1,3 @@
+from serpar.cli import main
+
+raise SystemExit(main())
