@@ -66,7 +66,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     from sim.render import CameraRenderer, save_png
     from sim.scene import build_scene
 
+    from sim.poses import apply_state
+
     scene = build_scene(_scene_config(args))
+    apply_state(scene, args.state)
     renderer = CameraRenderer(scene.model)
     image = renderer.render(scene.data, args.camera, args.width, args.height)
     out = save_png(image, args.out)
@@ -122,6 +125,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output .png path")
     p.add_argument("--width", type=int, help="image width (stereo cameras: 4:3 with height)")
     p.add_argument("--height", type=int, help="image height")
+    p.add_argument("--state", default="home",
+                   help="preview state: home (default) or inspect (a conductor in hand at the "
+                        "in-hand cameras; kinematic pose for pictures)")
     p.set_defaults(func=cmd_render)
 
     p = sub.add_parser("validate", help="physical validation checks, PASS/FAIL (exit 1 on FAIL)")

@@ -84,11 +84,11 @@ def _add_environment(spec: mujoco.MjSpec, cfg: SceneConfig) -> None:
                    rgba=[0.35, 0.36, 0.38, 1])
     bx, by, bz = cfg.backlight_position
     # Diffuse backlight panel behind the in-hand inspection point: the journal is seen in silhouette.
-    world.add_geom(name="backlight", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.05, 0.002, 0.04],
+    world.add_geom(name="backlight", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.08, 0.002, 0.05],
                    pos=[bx, by, bz], rgba=[1, 1, 1, 1], contype=0, conaffinity=0,
                    material=_emissive(spec))
     world.add_geom(name="backlight_post", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                   size=[0.008, (bz - 0.04) / 2, 0], pos=[bx, by + 0.01, (bz - 0.04) / 2],
+                   size=[0.008, (bz - 0.05) / 2, 0], pos=[bx, by + 0.01, (bz - 0.05) / 2],
                    rgba=[0.3, 0.3, 0.32, 1])
 
 

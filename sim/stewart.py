@@ -50,7 +50,7 @@ class StewartConfig:
     lower_hinge_limit_deg: float = 20.0
     upper_hinge_limit_deg: float = 30.0
     swap_legs12: bool = True
-    """Exchange P and B of legs 1, 2 of Table 2 (misprint fix; False = singular table as printed)."""
+    """Exchange P and B of legs 1, 2 of Table 2 (misprint fix; False: the singular table)."""
     platform_mass: float = 2.87
     """Aluminium disc r = 130 mm, t = 20 mm: 2700 kg/m^3 * pi r^2 t = 2.87 kg."""
     cyl_mass: float = 0.20
@@ -58,18 +58,18 @@ class StewartConfig:
     leg_armature: float = 25.0
     """Reflected rotor inertia per slide [kg]: J (2 pi / lead)^2, J = 1.6e-5 kg m^2, lead 5 mm."""
     leg_kp: float = 1.6e6
-    """Servo stiffness [N/m]: sqrt(kp / m) ~ 2 pi 40 Hz for the lightest leg-space mode (25.4 kg)."""
+    """Servo stiffness [N/m]: sqrt(kp / m) ~ 2 pi 40 Hz for the lightest leg-space mode (25 kg)."""
     leg_kv: float = 1.28e4
     """Servo damping [N s/m]: 2 omega_n m, critically damped for the lightest leg-space mode."""
     leg_ki: float = 2.0e7
-    """Integral gain [N/(m s)]: removes the gravity sag; Routh margin 4 for the heaviest mode (250 kg)."""
+    """Integral gain [N/(m s)]: removes gravity sag; Routh margin 4 at the heaviest mode (250 kg)"""
     leg_imax: float = 300.0
-    """Anti-windup clamp of the integral force [N]; static load per leg is ~ 6 N."""
+    """Anti-windup clamp of the integral force [N]; gravity loads each leg with ~ 20 N."""
     leg_force_limit: float = 1000.0
-    """Peak actuator force [N]: ~150x the static load, typical of a 100-200 W electric cylinder."""
+    """Peak actuator force [N]: ~50x the static load, typical of a 100-400 W electric cylinder."""
     loop_solimp: tuple[float, float, float, float, float] = (0.9999, 0.99999, 1e-6, 0.5, 2.0)
     """Impedance of the spherical-joint connects (solref comes from PhysicsConfig): with d0 =
-    0.995 (the contact setting) a step command opens the loops by 0.74 um, with 0.9999 by 0.17 um."""
+    0.995 (the contact setting) a step command opens the loops 0.74 um, with 0.9999 0.17 um."""
     hinge_damping: float = 0.01
     """Viscous friction of the universal-joint bearings [N m s/rad]."""
     platform_radius: float = 0.13
@@ -89,7 +89,7 @@ class StewartConfig:
                 raise ConfigError(f"{name}={getattr(self, name)} must be >= 0")
         d0, dw, width = self.loop_solimp[:3]
         if not (0 < d0 <= dw < 1 and width > 0):
-            raise ConfigError(f"loop_solimp {self.loop_solimp} needs 0 < d0 <= dwidth < 1, width > 0")
+            raise ConfigError(f"loop_solimp {self.loop_solimp}: need 0 < d0 <= dmax < 1, width > 0")
         for name in ("lower_hinge_limit_deg", "upper_hinge_limit_deg"):
             if not 0 < getattr(self, name) <= 90:
                 raise ConfigError(f"{name}={getattr(self, name)}: valid range 0 < x <= 90")
@@ -99,13 +99,13 @@ class StewartConfig:
                               f"got {np.round(s_home, 5)}")
         sv = np.linalg.svd(_leg_jacobian(self, self.home_pos, np.eye(3)), compute_uv=False)
         if sv[-1] < 1e-6 * sv[0]:  # the legs cannot hold the platform: a mechanism, not a robot
-            raise ConfigError(f"joint table is singular at home (sigma ratio {sv[-1] / sv[0]:.1e}); "
+            raise ConfigError(f"joint table singular at home (sigma ratio {sv[-1] / sv[0]:.1e}); "
                               "Table 2 as printed needs swap_legs12=True")
         # Routh-Hurwitz for m s^3 + kv s^2 + kp s + ki, for every leg-space mode at home:
         # the platform's poorly conditioned directions weigh ~20x more than the Z mode.
         m_max = float(leg_space_masses(self)[-1])
         if self.leg_ki > 0 and not self.leg_kv * self.leg_kp > m_max * self.leg_ki:
-            raise ConfigError(f"unstable leg servo: need kv*kp > m_max*ki with m_max={m_max:.1f} kg, "
+            raise ConfigError(f"unstable leg servo: need kv*kp > m_max*ki, m_max={m_max:.1f} kg, "
                               f"i.e. leg_ki < {self.leg_kv * self.leg_kp / m_max:.3g}")
 
     @property
@@ -279,7 +279,7 @@ def loop_site_ids(model: mujoco.MjModel, prefix: str = "") -> tuple[np.ndarray, 
     def sid(name: str) -> int:
         k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, prefix + name)
         if k < 0:
-            raise ConfigError(f"site {prefix + name!r} not in the model; is prefix {prefix!r} right?")
+            raise ConfigError(f"site {prefix + name!r} not in the model; check prefix {prefix!r}")
         return k
     ends = np.array([sid(f"rod_end{i}") for i in range(1, N_LEGS + 1)])
     joints = np.array([sid(f"p_joint{i}") for i in range(1, N_LEGS + 1)])

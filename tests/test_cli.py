@@ -65,3 +65,22 @@ def test_validate_json_subset(capsys):
     assert main(["validate", "--json", "--check", "rim_rest"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["passed"] and out["checks"][0]["name"] == "rim_rest"
+
+
+@pytest.mark.parametrize("camera", ["inspect_left", "inspect_right"])
+def test_in_hand_cameras_see_the_journal_against_the_backlight(tmp_path, camera):
+    out = tmp_path / "inspect.png"
+    assert main(["render", "--state", "inspect", "--camera", camera, "--out", str(out),
+                 "--width", "640"]) == 0
+    img = np.asarray(Image.open(out)).astype(int)
+    brass = (img[..., 0] - img[..., 2] > 25) & (img[..., 0] > 60)
+    backlight = img.min(axis=2) > 240
+    assert brass.sum() > 300 and backlight.mean() > 0.3
+    # The part hangs near the image centre (the pair converges on the inspection point).
+    cols = np.nonzero(brass.any(axis=0))[0]
+    assert abs(cols.mean() - 320) < 80
+
+
+def test_render_state_rejects_unknown():
+    r = run("render", "--state", "flying", "--camera", "overview", "--out", "x.png")
+    assert r.returncode == 2 and "valid: home, inspect" in r.stderr

@@ -109,6 +109,9 @@ def test_qpos0_closes_loops(model: mujoco.MjModel) -> None:
     strokes = np.array([data.sensor(f"stroke{i}").data[0] for i in range(1, N_LEGS + 1)])
     np.testing.assert_allclose(strokes, home_strokes(CFG), atol=1e-12)
     np.testing.assert_allclose(spherical_angles_deg(model, data), 0, atol=1e-6)
+    # Hinge stops are +-20 deg in radians (MjSpec defaults to degrees: a past bug).
+    np.testing.assert_allclose(model.joint("u3_b").range, np.radians([-20, 20]))
+    np.testing.assert_allclose(model.joint("leg3").range, [0, CFG.stroke])
 
 
 def test_closed_loops_hold_under_gravity(model: mujoco.MjModel) -> None:
@@ -118,7 +121,7 @@ def test_closed_loops_hold_under_gravity(model: mujoco.MjModel) -> None:
     assert worst <= 1e-6, f"loop violation {worst * 1e6:.4f} um"
     assert np.linalg.norm(pos - CFG.home_pos) <= 1e-5, f"pose error {(pos - CFG.home_pos) * 1e6} um"
     assert _quat_angle(quat, IDENTITY) < 1e-5
-    # Gravity really loads the legs: the servos push up, about a sixth of the weight each.
+    # Gravity really loads the legs: their net axial force carries the weight (legs tilt ~13 deg).
     weight = -model.opt.gravity[2] * float(np.sum(model.body_mass))
     assert 0.5 * weight < float(np.sum(data.actuator_force)) < 1.5 * weight
 
@@ -151,7 +154,8 @@ def test_full_stroke_motion_keeps_loops_closed(model: mujoco.MjModel) -> None:
 def test_lateral_pose_is_reached(model: mujoco.MjModel) -> None:
     data = mujoco.MjData(model)
     goal_pos = np.array([0.020, 0.0, CFG.home_z])
-    goal_quat = np.array([np.cos(np.radians(1.5)), 0.0, 0.0, np.sin(np.radians(1.5))])  # 3 deg about z
+    half = np.radians(3.0) / 2  # 3 deg about z
+    goal_quat = np.array([np.cos(half), 0.0, 0.0, np.sin(half)])
     worst = _settle(model, data, stroke_for_pose(goal_pos, goal_quat, CFG), 1.0)
     pos, quat = _pose(model, data)
     assert np.linalg.norm(pos - goal_pos) <= 2e-5, f"pose error {(pos - goal_pos) * 1e6} um"
@@ -167,6 +171,7 @@ def test_attach_keeps_actuators_equalities_sensors() -> None:
     PhysicsConfig().apply(parent)
     model = parent.compile()
     assert (model.nu, model.neq, model.nsensor) == (N_LEGS, N_LEGS, N_LEGS + 2)
+    np.testing.assert_allclose(model.joint("stewart/u1_a").range, np.radians([-20, 20]))
     for i in range(1, N_LEGS + 1):
         assert model.actuator(f"stewart/leg{i}").trntype == mujoco.mjtTrn.mjTRN_JOINT
         assert model.equality(f"stewart/loop{i}").type == mujoco.mjtEq.mjEQ_CONNECT
@@ -174,12 +179,13 @@ def test_attach_keeps_actuators_equalities_sensors() -> None:
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     assert loop_violation(model, data, prefix="stewart/") < 1e-9
-    np.testing.assert_allclose(data.sensor("stewart/platform_pos").data, [0.6, 0, CFG.home_z], atol=1e-12)
+    home_in_parent = [0.6, 0, CFG.home_z]
+    np.testing.assert_allclose(data.sensor("stewart/platform_pos").data, home_in_parent, atol=1e-12)
     data.ctrl[:] = home_strokes(CFG)
     for _ in range(5000):
         mujoco.mj_step(model, data)
     assert loop_violation(model, data, prefix="stewart/") <= 1e-6
-    np.testing.assert_allclose(data.sensor("stewart/platform_pos").data, [0.6, 0, CFG.home_z], atol=1e-5)
+    np.testing.assert_allclose(data.sensor("stewart/platform_pos").data, home_in_parent, atol=1e-5)
 
 
 @pytest.mark.parametrize("kwargs", [{"stroke": -1}, {"l_min": 0}, {"home_z": 0.5},

@@ -1,0 +1,87 @@
+"""Preview states for pictures: kinematic poses (no dynamics), e.g. a conductor in hand at the
+inspection point so the in-hand cameras have something to see.
+
+These set positions directly and call mj_forward; they are for rendering and
+tests, never a substitute for the task's grasp or insertion.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+from scipy.optimize import least_squares
+
+from sim import names
+from sim.arm import FINGER_JOINT_NAMES, Q_MAX, Q_MIN, TCP_SITE
+from sim.errors import ConfigError, UnknownNameError
+from sim.scene import Scene
+
+STATES: tuple[str, ...] = ("home", "inspect")
+DOWN = np.array([0.0, 0.0, -1.0])
+
+
+def solve_tcp_pose(scene: Scene, position: np.ndarray, approach: np.ndarray = DOWN,
+                   yaw_hint: float | None = None) -> np.ndarray:
+    """Arm joint angles putting the TCP at `position` with its z axis along `approach`.
+
+    Damped least squares within the joint limits (scipy); raises if the residual > 1 um.
+    """
+    m, d = scene.model, scene.data
+    site = m.site(names.ARM + TCP_SITE).id
+    work = mujoco.MjData(m)
+    work.qpos[:] = d.qpos
+
+    def residual(q: np.ndarray) -> np.ndarray:
+        work.qpos[scene.arm_qpos_adr] = q
+        mujoco.mj_kinematics(m, work)
+        rot = work.site_xmat[site].reshape(3, 3)
+        res = [work.site_xpos[site] - position, 0.1 * (rot[:, 2] - approach)]
+        if yaw_hint is not None:
+            res.append([0.01 * (np.arctan2(rot[1, 0], rot[0, 0]) - yaw_hint)])
+        return np.concatenate(res)
+
+    q0 = d.qpos[scene.arm_qpos_adr].copy()
+    sol = least_squares(residual, q0, bounds=(np.array(Q_MIN), np.array(Q_MAX)), xtol=1e-14,
+                        ftol=1e-14, gtol=1e-14)
+    if np.linalg.norm(sol.fun[:3]) > 1e-6:
+        raise ConfigError(f"TCP target {np.round(position, 4)} m is out of the arm's reach "
+                          f"(residual {np.linalg.norm(sol.fun[:3]) * 1e3:.2f} mm)")
+    return sol.x
+
+
+def pose_inspect(scene: Scene, conductor: int = 0) -> None:
+    """Arm at the in-hand inspection point, fingers closed on `conductor` (journal down)."""
+    if not 0 <= conductor < len(scene.conductor_bodies):
+        raise ConfigError(f"conductor {conductor}: valid 0..{len(scene.conductor_bodies) - 1}")
+    m, d = scene.model, scene.data
+    pair = next((p for p in scene.config.stereo_pairs if p.name == "inspect"), None)
+    if pair is None:
+        raise ConfigError("the scene has no 'inspect' stereo pair")
+    grasp_height = 0.5 * scene.config.conductor.body_length  # grasp the body at its middle
+    tcp = np.array(pair.target) + np.array([0.0, 0.0, grasp_height])
+    # Fingers squeeze across the cameras' line of sight, so the part is seen between them.
+    d.qpos[scene.arm_qpos_adr] = solve_tcp_pose(scene, tcp, yaw_hint=np.pi / 2)
+    radius = scene.diameters.bodies[conductor] / 2
+    for j in FINGER_JOINT_NAMES:
+        d.qpos[m.joint(names.ARM + j).qposadr[0]] = radius
+    mujoco.mj_kinematics(m, d)
+    site = m.site(names.ARM + TCP_SITE).id
+    rot = d.site_xmat[site].reshape(3, 3)
+    free = m.body(scene.conductor_bodies[conductor]).jntadr[0]
+    adr = m.jnt_qposadr[free]
+    shoulder = d.site_xpos[site] + grasp_height * rot[:, 2]
+    # Conductor z = -TCP z (body up, journal down); x along the TCP x.
+    part_rot = np.column_stack([rot[:, 0], -rot[:, 1], -rot[:, 2]])
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, part_rot.ravel())
+    d.qpos[adr:adr + 3], d.qpos[adr + 3:adr + 7] = shoulder, quat
+    mujoco.mj_forward(m, d)
+
+
+def apply_state(scene: Scene, state: str) -> None:
+    """Put `scene` into a named preview state."""
+    if state not in STATES:
+        raise UnknownNameError("state", state, STATES)
+    scene.reset()
+    if state == "inspect":
+        pose_inspect(scene)
