@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from sim.errors import ConfigError
-from sim.holes import BoreGeometry, add_bore, add_grid_plate
+from sim.holes import BoreGeometry, add_bore, add_grid_plate, grid_centres
 from sim.physics import PhysicsConfig
 from sim.tolerances import HOLE_H7
 
@@ -56,9 +56,7 @@ class BaseplateConfig:
 
     def hole_centres(self) -> np.ndarray:
         """(rows, cols, 2) hole centres in the plate frame."""
-        xs = (np.arange(self.cols) - (self.cols - 1) / 2) * self.pitch
-        ys = (np.arange(self.rows) - (self.rows - 1) / 2) * self.pitch
-        return np.stack(np.meshgrid(xs, ys), axis=-1)
+        return grid_centres(self.rows, self.cols, self.pitch)
 
     def bore(self, diameter: float) -> BoreGeometry:
         outer = self.window * np.sqrt(2) + 2e-4

@@ -52,6 +52,13 @@ class BoreGeometry:
         return gap * (1.0 / math.cos(math.pi / self.n_facets) - 1.0)
 
 
+def grid_centres(rows: int, cols: int, pitch: float) -> np.ndarray:
+    """(rows, cols, 2) centres of a grid centred on the origin, row-major from the -x, -y corner."""
+    xs = (np.arange(cols) - (cols - 1) / 2) * pitch
+    ys = (np.arange(rows) - (rows - 1) / 2) * pitch
+    return np.stack(np.meshgrid(xs, ys), axis=-1)
+
+
 def _quat_z(theta: float) -> np.ndarray:
     return np.array([math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2)])
 

@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from sim.errors import ConfigError
-from sim.holes import add_grid_plate
+from sim.holes import add_grid_plate, grid_centres
 
 TRAY_RGBA = (0.15, 0.30, 0.55, 1.0)  # blue ESD-safe polymer: brass parts stand out
 
@@ -45,9 +45,8 @@ class TrayConfig:
         return self.rows * self.cols
 
     def pocket_centres(self) -> np.ndarray:
-        xs = (np.arange(self.cols) - (self.cols - 1) / 2) * self.pitch
-        ys = (np.arange(self.rows) - (self.rows - 1) / 2) * self.pitch
-        return np.stack(np.meshgrid(xs, ys), axis=-1)
+        """(rows, cols, 2) pocket centres in the tray frame."""
+        return grid_centres(self.rows, self.cols, self.pitch)
 
 
 def build_tray_spec(config: TrayConfig = TrayConfig()) -> mujoco.MjSpec:
