@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections.abc import Sequence
 
@@ -23,7 +24,7 @@ def _scene_config(args: argparse.Namespace):
 
     cfg = load_yaml_config(SceneConfig, args.config) if args.config else SceneConfig()
     if args.seed is not None:
-        cfg = SceneConfig(**{**cfg.__dict__, "seed": args.seed})
+        cfg = dataclasses.replace(cfg, seed=args.seed)
     return cfg
 
 
@@ -87,11 +88,16 @@ def cmd_validate(args: argparse.Namespace) -> int:
     names = args.check or list(CHECKS)
     bar = progress(len(names), "validate", enabled=sys.stderr.isatty())
 
+    started: list[str] = []
+
     def step(name: str) -> None:
+        if started:  # the previous check has finished
+            bar.update(1)
+        started.append(name)
         bar.set_postfix_str(name)
-        bar.update(0)
 
     results = run_checks(args.check, physics, progress=step)
+    bar.update(1)
     bar.close()
     if args.json:
         print_json({"timestep_s": physics.timestep, "checks": [r.as_dict() for r in results],
