@@ -64,10 +64,9 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
+    from sim.poses import apply_state
     from sim.render import CameraRenderer, save_png
     from sim.scene import build_scene
-
-    from sim.poses import apply_state
 
     scene = build_scene(_scene_config(args))
     apply_state(scene, args.state)
@@ -80,8 +79,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from sim.physics import PhysicsConfig
     from sim.config_io import load_yaml_config
+    from sim.physics import PhysicsConfig
     from sim.validation import CHECKS, run_checks
 
     physics = load_yaml_config(PhysicsConfig, args.physics) if args.physics else PhysicsConfig()
@@ -112,7 +111,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="serpar", description=__doc__.split("\n")[0] if __doc__ else None)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser,
-                                metavar="{info,render,validate}")
+                                metavar="{info,render,validate,control-check,workspace}")
 
     def scene_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--seed", type=int, help="seed of the tolerance draws (integer; default 0)")
@@ -143,6 +142,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "lateral_penetration, noisy_stepping, stewart_loops")
     p.add_argument("--physics", help="physics config YAML (keys of sim.physics.PhysicsConfig)")
     p.set_defaults(func=cmd_validate)
+
+    from serpar import cmd_control_check, cmd_workspace
+
+    cmd_control_check.register(sub)
+    cmd_workspace.register(sub)
     return parser
 
 

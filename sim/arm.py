@@ -39,10 +39,13 @@ TORQUE_LIMITS: tuple[float, ...] = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
 Q_MIN: tuple[float, ...] = (-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973)
 Q_MAX: tuple[float, ...] = (2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973)
 
-LINK_NAMES: tuple[str, ...] = tuple(f"link{i}" for i in range(0, 8))
+LINK_NAMES: tuple[str, ...] = tuple(f"link{i}" for i in range(8))
 HAND_BODY = "hand"
 FINGER_BODIES: tuple[str, str] = ("finger_left", "finger_right")
 FINGER_JOINT_NAMES: tuple[str, str] = ("finger_left", "finger_right")
+FINGER_CARRIER_BODY = "finger_carrier"
+GRIP_COMPLIANCE_JOINT = "grip_compliance"
+"""Axial spring of the compliant gripper (fingers on the hand, along the approach axis)."""
 PAD_GEOMS: tuple[str, str] = ("pad_left", "pad_right")
 FINGER_EQUALITY = "finger_coupling"
 GRIP_ACTUATOR = "grip"

@@ -18,3 +18,11 @@ class UnknownNameError(SimError, KeyError):
 
     def __str__(self) -> str:  # KeyError would quote the message otherwise
         return self.args[0]
+
+
+class LimitError(SimError, ValueError):
+    """A physical limit (stroke, hinge or joint angle, torque, solver tolerance) is violated.
+
+    The message names the limit and its valid range, e.g.
+    "leg 3 stroke 52.1 mm outside [0, 50.8] mm".
+    """

@@ -27,7 +27,7 @@ class PhysicsConfig:
     tolerance: float = 1e-10
     ccd_tolerance: float = 1e-10
     """Convex-collision tolerance [m]; the default 1e-6 is the size of the clearance."""
-    impratio: float = 1.0
+    impratio: float = 100.0
     precision_solimp: tuple[float, float, float, float, float] = (0.995, 0.99999, 2e-6, 0.5, 2.0)
     """solimp of journal/bore contacts: full stiffness reached at 2 um penetration."""
     precision_timeconst: float | None = None

@@ -17,6 +17,9 @@ from sim.errors import ConfigError, UnknownNameError
 from sim.scene import Scene
 
 STATES: tuple[str, ...] = ("home", "inspect")
+GRASP_HEIGHT = 0.006
+"""TCP (pad centre) above the conductor's shoulder [m]: the fingertips end 4 mm below the
+TCP, so they stay 2 mm clear of the plate when the shoulder seats."""
 DOWN = np.array([0.0, 0.0, -1.0])
 
 
@@ -49,26 +52,22 @@ def solve_tcp_pose(scene: Scene, position: np.ndarray, approach: np.ndarray = DO
     return sol.x
 
 
-def pose_inspect(scene: Scene, conductor: int = 0) -> None:
-    """Arm at the in-hand inspection point, fingers closed on `conductor` (journal down)."""
+def put_in_hand(scene: Scene, conductor: int, grasp_height: float) -> None:
+    """Place `conductor` between the fingers at the arm's current pose, journal along the TCP z,
+    held `grasp_height` above its shoulder; fingers just touching (no squeeze yet).
+
+    An initial condition for checks and pictures; the task grasps by physics.
+    """
     if not 0 <= conductor < len(scene.conductor_bodies):
         raise ConfigError(f"conductor {conductor}: valid 0..{len(scene.conductor_bodies) - 1}")
     m, d = scene.model, scene.data
-    pair = next((p for p in scene.config.stereo_pairs if p.name == "inspect"), None)
-    if pair is None:
-        raise ConfigError("the scene has no 'inspect' stereo pair")
-    grasp_height = 0.5 * scene.config.conductor.body_length  # grasp the body at its middle
-    tcp = np.array(pair.target) + np.array([0.0, 0.0, grasp_height])
-    # Fingers squeeze across the cameras' line of sight, so the part is seen between them.
-    d.qpos[scene.arm_qpos_adr] = solve_tcp_pose(scene, tcp, yaw_hint=np.pi / 2)
     radius = scene.diameters.bodies[conductor] / 2
     for j in FINGER_JOINT_NAMES:
         d.qpos[m.joint(names.ARM + j).qposadr[0]] = radius
     mujoco.mj_kinematics(m, d)
     site = m.site(names.ARM + TCP_SITE).id
     rot = d.site_xmat[site].reshape(3, 3)
-    free = m.body(scene.conductor_bodies[conductor]).jntadr[0]
-    adr = m.jnt_qposadr[free]
+    adr = m.jnt_qposadr[m.body(scene.conductor_bodies[conductor]).jntadr[0]]
     shoulder = d.site_xpos[site] + grasp_height * rot[:, 2]
     # Conductor z = -TCP z (body up, journal down); x along the TCP x.
     part_rot = np.column_stack([rot[:, 0], -rot[:, 1], -rot[:, 2]])
@@ -76,6 +75,17 @@ def pose_inspect(scene: Scene, conductor: int = 0) -> None:
     mujoco.mju_mat2Quat(quat, part_rot.ravel())
     d.qpos[adr:adr + 3], d.qpos[adr + 3:adr + 7] = shoulder, quat
     mujoco.mj_forward(m, d)
+
+
+def pose_inspect(scene: Scene, conductor: int = 0) -> None:
+    """Arm at the in-hand inspection point, fingers closed on `conductor` (journal down)."""
+    pair = next((p for p in scene.config.stereo_pairs if p.name == "inspect"), None)
+    if pair is None:
+        raise ConfigError("the scene has no 'inspect' stereo pair")
+    tcp = np.array(pair.target) + np.array([0.0, 0.0, GRASP_HEIGHT])
+    # Fingers squeeze across the cameras' line of sight, so the part is seen between them.
+    scene.data.qpos[scene.arm_qpos_adr] = solve_tcp_pose(scene, tcp, yaw_hint=np.pi / 2)
+    put_in_hand(scene, conductor, GRASP_HEIGHT)
 
 
 def apply_state(scene: Scene, state: str) -> None:

@@ -15,6 +15,7 @@ import numpy as np
 
 from sim.baseplate import BaseplateConfig, build_baseplate_spec
 from sim.conductor import ConductorConfig, add_conductor_geoms
+from sim.contact import contact_force_on
 from sim.errors import ConfigError
 from sim.physics import PhysicsConfig
 
@@ -85,16 +86,7 @@ class Rig:
 
     def contact_force(self) -> np.ndarray:
         """Total contact force on the conductor in world coordinates [N]."""
-        total = np.zeros(3)
-        f6 = np.zeros(6)
-        for i in range(self.data.ncon):
-            c = self.data.contact[i]
-            sign = 1.0 if c.geom2 in self.conductor_geoms else -1.0 if c.geom1 in self.conductor_geoms else 0.0
-            if sign == 0.0:
-                continue
-            mujoco.mj_contactForce(self.model, self.data, i, f6)
-            total += sign * c.frame.reshape(3, 3).T @ f6[:3]
-        return total
+        return contact_force_on(self.model, self.data, self.conductor_geoms)
 
 
 def build_rig(config: RigConfig = RigConfig(), physics: PhysicsConfig = PhysicsConfig()) -> Rig:

@@ -151,6 +151,7 @@ class Scene:
         self.data.ctrl[self.leg_actuators] = home_strokes(self.config.stewart)
         mujoco.mj_forward(self.model, self.data)
         self.gravity_hold_arm()
+        mujoco.mj_forward(self.model, self.data)  # sensors (joint torques) see the held arm
 
     def gravity_hold_arm(self) -> None:
         """Arm motor torques = gravity + Coriolis bias (needs an up-to-date qfrc_bias)."""

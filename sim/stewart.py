@@ -15,22 +15,35 @@ Table 2 as printed is architecture-singular (the six leg lines are dependent at
 every pose: with locked legs the platform has a self-motion and falls along it).
 ``swap_legs12`` (default on) exchanges the platform and base columns of legs 1
 and 2, a likely misprint; see assets/stewart/README.md.
+
+The maths (IK, FK, leg Jacobian, hinge angles, limits) is in
+:mod:`controllers.stewart_kinematics`, the joint table in :mod:`sim.stewart_table`;
+this module builds the MuJoCo model and delegates to them.
 """
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
-from functools import lru_cache
 
 import mujoco
 import numpy as np
 
-from assets import asset_path
+from controllers.rotations import quat_to_rot
+from controllers.stewart_kinematics import (
+    N_LEGS,
+    StewartGeometry,
+    inverse_kinematics,
+    jacobian,
+    singularity_measure,
+)
 from sim.errors import ConfigError
 from sim.physics import PhysicsConfig
+from sim.stewart_table import load_joint_table, table_geometry
 
-N_LEGS = 6
+__all__ = ["N_LEGS", "StewartConfig", "build_stewart_spec", "home_strokes", "leg_space_masses",
+           "load_joint_table", "loop_site_ids", "loop_violation", "spherical_angles_deg",
+           "stewart_geometry", "stroke_for_pose"]
+
 CYL_RGBA = (0.55, 0.56, 0.58, 1.0)  # anodised grey motor/cylinder housing
 ROD_RGBA = (0.20, 0.40, 0.80, 1.0)  # blue piston rod
 PLATFORM_RGBA = (0.45, 0.47, 0.50, 1.0)  # grey anodised aluminium: the bright plate stands out
@@ -90,16 +103,15 @@ class StewartConfig:
         d0, dw, width = self.loop_solimp[:3]
         if not (0 < d0 <= dw < 1 and width > 0):
             raise ConfigError(f"loop_solimp {self.loop_solimp}: need 0 < d0 <= dmax < 1, width > 0")
-        for name in ("lower_hinge_limit_deg", "upper_hinge_limit_deg"):
-            if not 0 < getattr(self, name) <= 90:
-                raise ConfigError(f"{name}={getattr(self, name)}: valid range 0 < x <= 90")
-        s_home = stroke_for_pose(np.array([0.0, 0.0, self.home_z]), np.array([1.0, 0, 0, 0]), self)
+        # The geometry checks the hinge limits and that home is within the stroke.
+        geom = self.geometry()
+        s_home = inverse_kinematics(geom, self.home_pos, np.eye(3))
         if not np.all((s_home > 0) & (s_home < self.stroke)):
             raise ConfigError(f"home_z={self.home_z} m needs strokes inside (0, {self.stroke}) m, "
                               f"got {np.round(s_home, 5)}")
-        sv = np.linalg.svd(_leg_jacobian(self, self.home_pos, np.eye(3)), compute_uv=False)
-        if sv[-1] < 1e-6 * sv[0]:  # the legs cannot hold the platform: a mechanism, not a robot
-            raise ConfigError(f"joint table singular at home (sigma ratio {sv[-1] / sv[0]:.1e}); "
+        inv_cond = float(singularity_measure(jacobian(geom, self.home_pos, np.eye(3))))
+        if inv_cond < 1e-6:  # the legs cannot hold the platform: a mechanism, not a robot
+            raise ConfigError(f"joint table singular at home (sigma ratio {inv_cond:.1e}); "
                               "Table 2 as printed needs swap_legs12=True")
         # Routh-Hurwitz for m s^3 + kv s^2 + kp s + ki, for every leg-space mode at home:
         # the platform's poorly conditioned directions weigh ~20x more than the Z mode.
@@ -122,49 +134,22 @@ class StewartConfig:
     def home_pos(self) -> np.ndarray:
         return np.array([0.0, 0.0, self.home_z])
 
-
-@lru_cache(maxsize=1)
-def _read_joint_table() -> tuple[tuple[float, ...], ...]:
-    with asset_path("stewart", "joints.csv").open(newline="") as f:
-        rows = sorted(csv.DictReader(f), key=lambda r: int(r["leg"]))
-    if [int(r["leg"]) for r in rows] != list(range(1, N_LEGS + 1)):
-        raise ConfigError("assets/stewart/joints.csv must list legs 1..6 exactly once")
-    keys = ("px_mm", "py_mm", "bx_mm", "by_mm", "bz_mm")
-    return tuple(tuple(float(r[k]) for k in keys) for r in rows)
+    def geometry(self) -> StewartGeometry:
+        """Kinematic geometry (joints, l_min, stroke, hinge limits, home) for the kinematics."""
+        return table_geometry(self.swap_legs12, self.l_min, self.stroke,
+                              self.lower_hinge_limit_deg, self.upper_hinge_limit_deg, self.home_z)
 
 
-def load_joint_table(swap_legs12: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """(P, B): 6x3 platform joints in the platform frame (z = 0) and base joints, in metres.
-
-    The CSV's pz (245 mm) is the Table 2 platform height, not part of the platform frame.
-    swap_legs12 exchanges the platform/base xy of legs 1 and 2 (see the module docstring).
-    """
-    t = np.array(_read_joint_table()) * 1e-3  # mm -> m
-    p = np.column_stack([t[:, 0], t[:, 1], np.zeros(N_LEGS)])
-    b = t[:, 2:5].copy()
-    if swap_legs12:
-        p[:2, :2], b[:2, :2] = b[:2, :2].copy(), p[:2, :2].copy()
-    return p, b
+def stewart_geometry(cfg: StewartConfig | None = None) -> StewartGeometry:
+    """The :class:`StewartGeometry` of a config (default config when None)."""
+    return (cfg or StewartConfig()).geometry()
 
 
 def stroke_for_pose(pos: np.ndarray, quat: np.ndarray,
                     cfg: StewartConfig | None = None) -> np.ndarray:
     """Nominal inverse kinematics: s_i = |pos + R(quat) P_i - B_i| - l_min (quat is w,x,y,z)."""
-    cfg = cfg or StewartConfig()
-    p, b = load_joint_table(cfg.swap_legs12)
-    rot = np.zeros(9)
-    mujoco.mju_quat2Mat(rot, np.asarray(quat, dtype=float) / np.linalg.norm(quat))
-    legs = np.asarray(pos, dtype=float) + p @ rot.reshape(3, 3).T - b
-    return np.linalg.norm(legs, axis=1) - cfg.l_min
-
-
-def _leg_jacobian(cfg: StewartConfig, pos: np.ndarray, rot: np.ndarray) -> np.ndarray:
-    """d(stroke)/d(twist): rows (n_i, R P_i x n_i); twist = (origin velocity, angular velocity)."""
-    p, b = load_joint_table(cfg.swap_legs12)
-    rp = p @ rot.T
-    legs = pos + rp - b
-    n = legs / np.linalg.norm(legs, axis=1, keepdims=True)
-    return np.hstack([n, np.cross(rp, n)])
+    return inverse_kinematics(stewart_geometry(cfg), np.asarray(pos, dtype=float),
+                              quat_to_rot(quat))
 
 
 def leg_space_masses(cfg: StewartConfig) -> np.ndarray:
@@ -177,7 +162,7 @@ def leg_space_masses(cfg: StewartConfig) -> np.ndarray:
     c = np.array([[0, -t / 2, 0], [t / 2, 0, 0], [0, 0, 0]])  # skew of the COM offset (0, 0, t/2)
     inertia = np.diag([m * (3 * r * r + t * t) / 12] * 2 + [m * r * r / 2]) - m * c @ c
     mass = np.block([[m * np.eye(3), -m * c], [m * c, inertia]])
-    jac = _leg_jacobian(cfg, cfg.home_pos, np.eye(3))
+    jac = jacobian(cfg.geometry(), cfg.home_pos, np.eye(3))
     lam = np.linalg.inv(jac @ np.linalg.solve(mass, jac.T))
     return np.linalg.eigvalsh(lam) + cfg.leg_armature + cfg.rod_mass
 
@@ -199,8 +184,9 @@ def _leg_frame(direction: np.ndarray) -> np.ndarray:
 
 
 def build_stewart_spec(cfg: StewartConfig = StewartConfig(),
-                       physics: PhysicsConfig = PhysicsConfig()) -> mujoco.MjSpec:
+                       physics: PhysicsConfig | None = None) -> mujoco.MjSpec:
     """MjSpec of the platform at its home pose; qpos0 closes every loop exactly."""
+    physics = physics or PhysicsConfig()
     spec = mujoco.MjSpec()
     spec.modelname = "stewart"
     spec.compiler.degree = False  # MjSpec defaults to degrees; every angle below is in radians
@@ -299,9 +285,7 @@ def spherical_angles_deg(model: mujoco.MjModel, data: mujoco.MjData,
 
     The connect constraint has no stop; compare against cfg.upper_hinge_limit_deg.
     """
-    p, b = load_joint_table(cfg.swap_legs12)
-    home_dir = cfg.home_pos + p - b
-    home_dir /= np.linalg.norm(home_dir, axis=1, keepdims=True)
+    home_dir = stewart_geometry(cfg).home_directions
     plat = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, prefix + "platform")
     rot_plat = data.xmat[plat].reshape(3, 3)
     out = np.empty(N_LEGS)

@@ -96,7 +96,8 @@ def test_masses_equal_published_values() -> None:
     m = _arm_model()
     for name, mass in PUBLISHED_LINK_MASS.items():
         assert m.body(name).mass[0] == pytest.approx(mass, abs=1e-9), name
-    hand = m.body("hand").mass[0] + sum(m.body(b).mass[0] for b in arm.FINGER_BODIES)
+    hand = (m.body("hand").mass[0] + m.body(arm.FINGER_CARRIER_BODY).mass[0]
+            + sum(m.body(b).mass[0] for b in arm.FINGER_BODIES))
     assert hand == pytest.approx(PUBLISHED_HAND_MASS, abs=1e-9)
     moving = sum(PUBLISHED_LINK_MASS[f"link{i}"] for i in range(1, 8)) + PUBLISHED_HAND_MASS
     # subtree of link1 = everything that moves (link0 is the fixed base)

@@ -58,7 +58,7 @@ def test_render_top_camera_sees_plate_and_tray(tmp_path):
     # Brass conductors (yellow: R > B) and the blue tray are both in view.
     r, g, b = (img[..., i].astype(int) for i in range(3))
     assert ((r - b > 60) & (g > 80)).sum() > 50
-    assert ((b - r > 60)).sum() > 500
+    assert (b - r > 60).sum() > 500
 
 
 def test_validate_json_subset(capsys):

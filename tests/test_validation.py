@@ -2,10 +2,16 @@
 
 import pytest
 
-from sim.physics import PhysicsConfig
-from sim.validation import CHECKS, check_aligned_insertion, check_lateral_penetration, check_rim_rest, \
-    check_stewart_loops, run_checks
 from sim.errors import UnknownNameError
+from sim.physics import PhysicsConfig
+from sim.validation import (
+    CHECKS,
+    check_aligned_insertion,
+    check_lateral_penetration,
+    check_rim_rest,
+    check_stewart_loops,
+    run_checks,
+)
 
 PHYSICS = PhysicsConfig()
 

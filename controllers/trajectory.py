@@ -1,0 +1,45 @@
+"""Interpolated Cartesian motions: minimum-jerk straight lines with fixed orientation."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from controllers.arm_laws import CartesianTarget
+from sim.errors import ConfigError
+
+Vec = NDArray[np.float64]
+
+
+def min_jerk(s: float) -> tuple[float, float, float]:
+    """Phase s in [0, 1] -> (position, velocity, acceleration) of the quintic 10s^3-15s^4+6s^5,
+    derivatives per unit phase."""
+    s = min(max(s, 0.0), 1.0)
+    p = s**3 * (10 - 15 * s + 6 * s * s)
+    v = 30 * s * s * (1 - s) ** 2
+    a = 60 * s * (1 - s) * (1 - 2 * s)
+    return p, v, a
+
+
+@dataclass(frozen=True, eq=False)
+class LineMove:
+    """Straight TCP line from start to goal in `duration` seconds, orientation held at `rot`."""
+
+    start: Vec
+    goal: Vec
+    rot: Vec
+    duration: float
+
+    def __post_init__(self) -> None:
+        if not self.duration > 0:
+            raise ConfigError(f"duration={self.duration} s must be > 0")
+
+    def at(self, t: float) -> CartesianTarget:
+        p, v, a = min_jerk(t / self.duration)
+        delta = np.asarray(self.goal) - np.asarray(self.start)
+        zeros = np.zeros(3)
+        return CartesianTarget(self.start + p * delta, self.rot,
+                               np.concatenate([v / self.duration * delta, zeros]),
+                               np.concatenate([a / self.duration**2 * delta, zeros]))
