@@ -28,6 +28,7 @@ from controllers.arm_laws import (
 from controllers.arm_model import ArmIndex, NominalArm, require_joint_target, saturate_torque
 from controllers.arm_sensors import ArmMeasurement, ArmSensorConfig, ArmSensors
 from controllers.wrench import WrenchEstimator, WrenchEstimatorConfig
+from sim.arm import TORQUE_LIMITS
 from sim.errors import ConfigError
 
 Vec = NDArray[np.float64]
@@ -88,8 +89,6 @@ class ArmController:
 
     def __init__(self, model: mujoco.MjModel, prefix: str = "",
                  config: ArmControllerConfig = ArmControllerConfig(), seed: int = 0) -> None:
-        from sim.arm import TORQUE_LIMITS
-
         self.config = config
         self.index = ArmIndex.from_model(model, prefix)
         self.substeps = config.substeps(model.opt.timestep)

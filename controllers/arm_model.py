@@ -139,7 +139,9 @@ def require_joint_target(q: Vec) -> Vec:
     return q
 
 
+_TORQUE_LIMITS = np.asarray(TORQUE_LIMITS)
+
+
 def saturate_torque(tau: Vec) -> tuple[Vec, NDArray[np.bool_]]:
     """Clip to the Panda torque limits; returns (clipped torque, which joints saturated)."""
-    lim = np.asarray(TORQUE_LIMITS)
-    return np.clip(tau, -lim, lim), np.abs(tau) > lim
+    return np.clip(tau, -_TORQUE_LIMITS, _TORQUE_LIMITS), np.abs(tau) > _TORQUE_LIMITS
