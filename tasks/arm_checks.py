@@ -177,13 +177,11 @@ def press(law: ControlLaw, noise: bool = True, force_n: float = 5.0, surface_err
         forces[k] = true[2]
         estimates[k] = ctrl.measured_push()
         errors[k] = ctrl.wrench[:3] - true  # F_ext estimate vs MuJoCo's contact force
-    result = _score_press(law, force_n, forces, estimates, ctrl, surface_error)
-    result.steady_estimate_error_n = float(np.linalg.norm(errors[-round(0.5 / ctrl.dt):].mean(axis=0)))
-    return result
+    return _score_press(law, force_n, forces, estimates, errors, ctrl, surface_error)
 
 
 def _score_press(law: ControlLaw, force_n: float, forces: np.ndarray, estimates: np.ndarray,
-                 ctrl: ArmController, surface_error: float) -> PressResult:
+                 errors: np.ndarray, ctrl: ArmController, surface_error: float) -> PressResult:
     dt = ctrl.dt
     touching = np.flatnonzero(forces > 0.05 * force_n)
     tail = slice(len(forces) - round(0.5 / dt), None)
@@ -197,5 +195,7 @@ def _score_press(law: ControlLaw, force_n: float, forces: np.ndarray, estimates:
     peak = float(forces.max())
     return PressResult(law.value, force_n, peak, 100 * max(peak - force_n, 0.0) / force_n, settle,
                        float(forces[tail].mean()), float(estimates[tail].mean()),
-                       surface_error * 1e3, force_trace=forces.tolist(),
+                       surface_error * 1e3,
+                       float(np.linalg.norm(errors[tail].mean(axis=0))),
+                       force_trace=forces.tolist(),
                        saturation=ctrl.saturation.summary())
