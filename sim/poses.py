@@ -24,8 +24,10 @@ DOWN = np.array([0.0, 0.0, -1.0])
 
 
 def solve_tcp_pose(scene: Scene, position: np.ndarray, approach: np.ndarray = DOWN,
-                   yaw_hint: float | None = None) -> np.ndarray:
-    """Arm joint angles putting the TCP at `position` with its z axis along `approach`.
+                   yaw_hint: float | None = None, rotation: np.ndarray | None = None,
+                   q_start: np.ndarray | None = None) -> np.ndarray:
+    """Arm joint angles putting the TCP at `position` with its z axis along `approach`
+    (or, when `rotation` is given, its whole frame at that rotation matrix).
 
     Damped least squares within the joint limits (scipy); raises if the residual > 1 um.
     """
@@ -38,15 +40,17 @@ def solve_tcp_pose(scene: Scene, position: np.ndarray, approach: np.ndarray = DO
         work.qpos[scene.arm_qpos_adr] = q
         mujoco.mj_kinematics(m, work)
         rot = work.site_xmat[site].reshape(3, 3)
+        if rotation is not None:
+            return np.concatenate([work.site_xpos[site] - position, 0.1 * (rot - rotation).ravel()])
         res = [work.site_xpos[site] - position, 0.1 * (rot[:, 2] - approach)]
         if yaw_hint is not None:
             res.append([0.01 * (np.arctan2(rot[1, 0], rot[0, 0]) - yaw_hint)])
         return np.concatenate(res)
 
-    q0 = d.qpos[scene.arm_qpos_adr].copy()
+    q0 = d.qpos[scene.arm_qpos_adr].copy() if q_start is None else np.asarray(q_start, float)
     sol = least_squares(residual, q0, bounds=(np.array(Q_MIN), np.array(Q_MAX)), xtol=1e-14,
                         ftol=1e-14, gtol=1e-14)
-    if np.linalg.norm(sol.fun[:3]) > 1e-6:
+    if np.linalg.norm(sol.fun[:3]) > 1e-6 or (rotation is not None and np.linalg.norm(sol.fun[3:]) > 1e-6):
         raise ConfigError(f"TCP target {np.round(position, 4)} m is out of the arm's reach "
                           f"(residual {np.linalg.norm(sol.fun[:3]) * 1e3:.2f} mm)")
     return sol.x

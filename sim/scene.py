@@ -15,6 +15,7 @@ import numpy as np
 from sim import names
 from sim.arm import ACTUATOR_NAMES, HOME_Q, JOINT_NAMES, build_arm_spec
 from sim.baseplate import BaseplateConfig, build_baseplate_spec
+from sim.calibration_board import CheckerboardConfig, add_board
 from sim.cameras import DEFAULT_PAIRS, SENSOR_PIXELS, StereoPairConfig, add_stereo_pair
 from sim.conductor import ConductorConfig, build_conductor_spec
 from sim.errors import ConfigError
@@ -44,6 +45,8 @@ class SceneConfig:
     tray_height: float = 0.22
     """Height of the tray's bottom face on its pedestal [m]."""
     backlight_position: tuple[float, float, float] = (0.45, -0.17, 0.35)
+    calibration_board: CheckerboardConfig | None = None
+    """A checkerboard mounted on the hand for camera calibration (None: the working gripper only)."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.seed, int) or isinstance(self.seed, bool):
@@ -108,6 +111,8 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
     _add_environment(spec, cfg)
     world = spec.worldbody
     spec.attach(build_arm_spec(), prefix=names.ARM, frame=world.add_frame(pos=[0, 0, 0]))
+    if cfg.calibration_board is not None:
+        add_board(spec, cfg.calibration_board)
     spec.attach(build_stewart_spec(cfg.stewart, cfg.physics), prefix=names.STEWART,
                 frame=world.add_frame(pos=list(cfg.stewart_base)))
     plate = build_baseplate_spec(diameters.holes, cfg.baseplate, cfg.physics)
