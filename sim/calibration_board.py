@@ -95,8 +95,9 @@ def add_board(spec: mujoco.MjSpec, board: CheckerboardConfig) -> None:
     s, t, b = board.square, board.thickness / 2, board.border
 
     def tile(cx: float, cy: float, hx: float, hy: float, material: str) -> None:
+        # Collidable so a calibration campaign can reject poses that would hit the cell.
         g = body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[hx, hy, t], pos=[cx, cy, -t],
-                          material=material, contype=0, conaffinity=0)
+                          material=material)
         g.density = 300.0  # light composite panel
 
     for i in range(nx):

@@ -19,7 +19,8 @@ from scipy.spatial.transform import Rotation
 from controllers.arm_model import NominalArm
 from controllers.arm_sensors import quantise
 from sim.arm import HOME_Q, Q_MAX, Q_MIN
-from sim.calibration_board import CheckerboardConfig
+from sim import names
+from sim.calibration_board import BOARD_BODY, CheckerboardConfig
 from sim.cameras import StereoPairConfig
 from sim.errors import ConfigError
 from sim.poses import solve_tcp_pose
@@ -66,8 +67,10 @@ class CalibrationVolume:
             raise ConfigError("calibration volume: views >= 3, tilt 0..45 deg, spreads >= 0")
 
 
-TOP_VOLUME = CalibrationVolume(centre=(0.60, 0.135, 0.36), spread=(0.06, 0.15, 0.03), tilt_deg=20, views=24)
-"""Above the baseplate and the tray (plate top at z ~ 0.30 m), across the top cameras' field."""
+TOP_VOLUME = CalibrationVolume(centre=(0.60, 0.135, 0.35), spread=(0.06, 0.15, 0.04), tilt_deg=20, views=50)
+"""Across the top cameras' field above the baseplate (top face z ~ 0.30 m) and the tray
+(conductor tops z ~ 0.235 m); the wrist beside the board keeps it from going lower, and
+poses that would hit the cell are skipped."""
 INSPECT_VOLUME = CalibrationVolume(centre=(0.45, -0.25, 0.35), spread=(0.008, 0.012, 0.006), tilt_deg=20,
                                    views=16)
 """Around the in-hand inspection point."""
@@ -103,16 +106,31 @@ def take_views(scene: Scene, pair: StereoPairConfig, board: CheckerboardConfig, 
         q = _reach(scene, tcp_target, rot, q_prev, rng)
         if q is None:
             continue
-        q_prev = q
         scene.reset()
         scene.data.qpos[scene.arm_qpos_adr] = q
         mujoco.mj_forward(scene.model, scene.data)
+        if _collides(scene):
+            continue
+        q_prev = q
         q_meas = quantise(q, ENCODER_COUNTS)
         arm.load(q_meas, np.zeros(7))
         tcp_pos, tcp_rot = arm.tcp_pose()
         frames = camera.shoot(scene.data, (left_name, right_name))
         views.append(BoardView(q_meas, tcp_rot, tcp_pos, frames[left_name], frames[right_name]))
     return views
+
+
+def _collides(scene: Scene) -> bool:
+    """Whether the arm (beyond its base) or the board touches anything at this pose."""
+    m, d = scene.model, scene.data
+    base = m.body(names.ARM + "link0").id
+    board = m.body(BOARD_BODY).id
+    moving = {b for b in range(m.nbody) if b == board or (m.body(b).name.startswith(names.ARM) and b != base)}
+    for c in d.contact[: d.ncon]:
+        b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
+        if (b1 in moving) != (b2 in moving) and c.dist < 0:
+            return True
+    return False
 
 
 def _reach(scene: Scene, tcp: NDArray[np.float64], rot: NDArray[np.float64], q_prev: NDArray[np.float64],

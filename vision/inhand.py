@@ -1,0 +1,339 @@
+"""In-hand inspection (step 4): the grasped conductor's journal axis relative to the gripper,
+measured from the two `inspect` images against the backlight.
+
+Per camera, sub-pixel silhouette edges are found row by row: the Ø5 body against the
+backlight below the pads and against the dark pads between them, the coaxial Ø1.7 journal
+against the backlight. Every edge pixel's viewing ray is tangent to its cylinder, so one
+robust least-squares fit over both cameras gives the common axis, both radii (which makes a
+symmetric edge bias harmless: the axis plane is the bisector of the tangent planes) and the
+offset of edges against the pads. The tip is where the fitted journal's chamfered end
+reproduces the lower end of its silhouette.
+
+Inputs are pixels, calibrated cameras and the TCP pose the arm model computes from the
+measured joints; nothing here reads simulator state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from sim.conductor import ConductorConfig
+from sim.tolerances import BODY_H6, JOURNAL_H6
+from vision.camera import CameraModel, StereoPair
+from vision.errors import ConductorNotInView, VisionError
+
+Vec = NDArray[np.float64]
+BODY, JOURNAL = 0, 1
+NOMINAL_CONDUCTOR = ConductorConfig()
+
+
+@dataclass(frozen=True)
+class InHandConfig:
+    """Detector settings; lengths in metres so that they hold at any readout size."""
+
+    grasp_height: float = 0.006
+    """Nominal shoulder distance below the TCP along its z (places the search window only)."""
+    search_margin: float = 0.0015
+    """Room around the nominal part for grasp errors [m]."""
+    chroma_threshold: int = 15
+    """Brass pixels: red minus blue above this (backlight, pads and fingers are grey)."""
+    min_area_fraction: float = 0.3
+    """Below this fraction of the expected brass area the part counts as not in view."""
+    end_margin: float = 1e-4
+    """Rows this close to where a silhouette edge ends are not used [m]."""
+    gate_px: float = 0.5
+    """Final outlier gate on the tangency residual [px] (rejects pad edges in front of the body)."""
+
+    def __post_init__(self) -> None:
+        if not (0 < self.chroma_threshold < 128 and 0 < self.min_area_fraction <= 1
+                and self.gate_px > 0):
+            raise VisionError("in-hand config: chroma_threshold in 1..127, min_area_fraction in "
+                              "(0, 1], gate_px > 0")
+
+
+@dataclass(frozen=True, eq=False)
+class CameraEdges:
+    """Silhouette edge points found in one image [px]."""
+
+    camera: str
+    uv: Vec
+    """(N, 2) side edges: sub-pixel u at row v."""
+    part: NDArray[np.int64]
+    """(N,) BODY or JOURNAL."""
+    dark: NDArray[np.bool_]
+    """(N,) True where the background is a pad, False for the backlight."""
+    tip_uv: Vec
+    """(M, 2) lower end of the journal silhouette: sub-pixel v at column u."""
+
+
+@dataclass(frozen=True, eq=False)
+class InHandMeasurement:
+    """The journal as held, in the TCP frame (x, y lateral; z the approach axis) [m, rad]."""
+
+    tip: Vec
+    """Journal tip centre (end face) in the TCP frame."""
+    axis: Vec
+    """Unit journal axis (body -> tip) in the TCP frame."""
+    offset: Vec
+    """Lateral offset of the axis at the tip: the tip's (x, y) in the TCP frame."""
+    tip_z: float
+    """Tip position along the TCP z."""
+    tilt: float
+    """Angle between the journal axis and the TCP z."""
+    tilt_direction: float
+    """Where the tip leans: atan2(axis y, axis x) in the TCP frame."""
+    tip_base: Vec
+    axis_base: Vec
+    """Tip centre and unit axis in the base frame."""
+    body_diameter: float
+    journal_diameter: float
+    """Fitted silhouette diameters (a plausibility check against the h6 bands)."""
+    rms_px: float
+    """RMS tangency residual of the edges used."""
+    edges: tuple[CameraEdges, CameraEdges]
+    """What was found in the left and right images."""
+    inliers: tuple[NDArray[np.bool_], NDArray[np.bool_]]
+    """Which of those side edges the final fit used (the rest: pads in front of the body, ...)."""
+    conductor: ConductorConfig
+
+
+def _subpixel(profile: Vec, i0: int, step: int) -> float:
+    """Edge in `profile` whose first inside pixel is `i0`, the outside lying towards `step`.
+
+    Area method: covered fractions of the pixels at the edge, between the outside level and
+    the inside level extrapolated to the edge.
+    """
+    outside = 0.5 * (profile[i0 + 4 * step] + profile[i0 + 5 * step])
+    span = 2.0 * profile[i0 - step] - profile[i0 - 2 * step] - outside
+    if abs(span) < 8.0:
+        return np.nan
+    cover = np.clip((profile[[i0 + 2 * step, i0 + step, i0]] - outside) / span, 0.0, 1.0).sum()
+    return i0 - 0.5 * step + step * float(cover)
+
+
+def _window(cam: CameraModel, shoulder: Vec, rot: Vec, cfg: ConductorConfig,
+            ext: float) -> tuple[int, ...]:
+    """Pixel box (u0, v0, u1, v1) around the nominal part, widened by `ext` [m]."""
+    z, e1, e2 = rot[:, 2], rot[:, 0], rot[:, 1]
+    corners = [shoulder + t * z + a * e1 + b * e2
+               for t in (-cfg.body_length - ext, cfg.journal_length + ext)
+               for a in (-ext, ext) for b in (-ext, ext)]
+    uv = cam.project(np.array(corners))
+    lo, hi = np.floor(uv.min(axis=0)).astype(int) - 8, np.ceil(uv.max(axis=0)).astype(int) + 8
+    return max(lo[0], 0), max(lo[1], 0), min(hi[0], cam.size[0]), min(hi[1], cam.size[1])
+
+
+def find_edges(cam: CameraModel, image: NDArray[np.uint8], tcp_pos: Vec, tcp_rot: Vec,
+               conductor: ConductorConfig = NOMINAL_CONDUCTOR,
+               config: InHandConfig = InHandConfig()) -> CameraEdges:
+    """Silhouette edges of the held conductor in one image; ConductorNotInView if there is none."""
+    img = cam.check_image(image)
+    if img.ndim != 3:
+        raise VisionError(f"camera {cam.name}: in-hand inspection needs colour images "
+                          "(brass against grey)")
+    z = tcp_rot[:, 2]
+    shoulder = tcp_pos + config.grasp_height * z
+    scale = float(cam.K[0, 0]) / float(cam.to_camera(shoulder)[0, 2])  # px per m at the part
+    ends = cam.project(np.array([shoulder - conductor.body_length * z, shoulder]))
+    down = (ends[1] - ends[0]) / np.linalg.norm(ends[1] - ends[0])
+    if down[1] < 0.85:  # rows cross the silhouette edges; the tip is the lowest brass
+        raise VisionError(f"camera {cam.name}: the journal must point down the image (it points "
+                          f"{np.round(down, 2)})")
+    r_b, r_j = BODY_H6.nominal / 2, JOURNAL_H6.nominal / 2
+    u0, v0, u1, v1 = _window(cam, shoulder, tcp_rot, conductor, r_b + config.search_margin)
+    if u1 - u0 < 16 or v1 - v0 < 16:
+        raise ConductorNotInView(f"camera {cam.name}: the gripper is outside the image")
+    roi = img[v0:v1, u0:u1].astype(float)
+    red, blue, grey = roi[..., 0], roi[..., 2], roi.mean(axis=2)
+    mask = (red - blue > config.chroma_threshold) & (grey < 200)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    expected = 2 * (r_b * conductor.body_length + r_j * conductor.journal_length) * scale**2
+    if n < 2 or stats[1:, cv2.CC_STAT_AREA].max() < config.min_area_fraction * expected:
+        raise ConductorNotInView(f"camera {cam.name}: no conductor between the fingers "
+                                 f"(expected ~{expected:.0f} brass pixels)")
+    blob = labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    rows = np.flatnonzero(blob.any(axis=1))
+    left = np.array([np.flatnonzero(blob[r])[0] for r in rows])
+    right = np.array([np.flatnonzero(blob[r])[-1] for r in rows])
+    width = right - left + 1
+    is_journal = width < (r_b + r_j) * scale
+    if is_journal.all() or not is_journal.any():
+        raise ConductorNotInView(f"camera {cam.name}: brass found, but not a body with a journal")
+    # Leave out rows where a silhouette edge ends: cap ellipses (half-height r sin(elevation),
+    # with room for the grasp tilt), the tip chamfer, plus a margin.
+    sin_e = abs(float(cam.rays(cam.project(shoulder[None]))[0] @ z)) + 0.06
+    cap = (r_b * sin_e + config.end_margin) * scale
+    tip_cap = (r_j * sin_e + conductor.tip_chamfer + config.end_margin) * scale
+    body_rows = rows[~is_journal]
+    ok_body = ~is_journal & (rows > body_rows.min() + cap) & (rows < body_rows.max() - cap)
+    # The journal's edges start past the last row wider than a journal (the shoulder face).
+    wide = rows[width > np.median(width[is_journal]) + 2]
+    tip_row = rows[is_journal].max()
+    ok_journal = is_journal & (rows > wide.max() + 2) & (rows < tip_row - tip_cap)
+    pts, parts, darks = [], [], []
+    for k in np.flatnonzero(ok_body | ok_journal):
+        r = rows[k]
+        for i0, step in ((left[k], -1), (right[k], 1)):
+            if not 0 <= i0 + 6 * step < blob.shape[1]:
+                continue
+            out = grey[r, i0 + 4 * step:i0 + 7 * step:step]
+            if out.min() > 200:  # backlight: the blue channel has the most contrast against brass
+                dark, profile = False, blue[r]
+            elif out.max() < 120 and abs(red[r, i0 + 4 * step] - blue[r, i0 + 4 * step]) < 15:
+                dark, profile = True, red[r]  # a grey pad: red has the contrast
+            else:
+                continue
+            e = _subpixel(profile, int(i0), step)
+            if np.isfinite(e):
+                pts.append((u0 + e, v0 + r))
+                parts.append(JOURNAL if is_journal[k] else BODY)
+                darks.append(dark)
+    tip = []
+    if ok_journal.sum() >= 3:  # columns about the journal's centre line, extrapolated to its end
+        line = np.polyfit(rows[ok_journal], 0.5 * (left + right)[ok_journal], 1)
+        centre = np.polyval(line, tip_row)
+        half = 0.5 * (r_j - conductor.tip_chamfer) * scale
+        first = max(int(np.ceil(centre - half)), 0)
+        for c in range(first, min(int(np.floor(centre + half)), blob.shape[1] - 1) + 1):
+            col = np.flatnonzero(blob[:, c])
+            j0 = int(col[-1]) if len(col) else blob.shape[0]
+            if j0 + 6 < blob.shape[0] and grey[j0 + 4:j0 + 7, c].min() > 200:
+                e = _subpixel(blue[:, c], j0, 1)
+                if np.isfinite(e):
+                    tip.append((u0 + c, v0 + e))
+    if len(pts) < 20 or len(tip) < 3:
+        raise ConductorNotInView(f"camera {cam.name}: too few silhouette edges of a conductor "
+                                 f"({len(pts)} along its sides, {len(tip)} at the tip)")
+    return CameraEdges(cam.name, np.array(pts, float), np.array(parts), np.array(darks),
+                       np.array(tip, float))
+
+
+@dataclass(frozen=True, eq=False)
+class _Rays:
+    """One camera's edges as viewing rays, with what each one is tangent to."""
+
+    centre: Vec
+    direction: Vec
+    part: NDArray[np.int64]
+    dark: NDArray[np.bool_]
+    weight: Vec
+    """Pixels per metre at the part."""
+
+
+_PRIOR_MM = np.array([0.02, 0.02, 0.01])
+"""Spreads of the weak priors on the radii and the dark-edge offset [mm]."""
+_X_SCALE = np.array([0.01, 0.01, 1e-4, 1e-4, 0.01, 0.01, 0.003])
+
+
+def _axis(x: Vec, origin: Vec, rot: Vec) -> tuple[Vec, Vec]:
+    """Axis point (in the plane through `origin` normal to the TCP z) and unit direction.
+
+    x = (dx, dy [mm] along TCP x, y; ax, ay [rad]; r_body, r_journal, dark-edge offset [mm]).
+    """
+    point = origin + 1e-3 * (x[0] * rot[:, 0] + x[1] * rot[:, 1])
+    direction = rot[:, 2] + x[2] * rot[:, 0] + x[3] * rot[:, 1]
+    return point, direction / np.linalg.norm(direction)
+
+
+def _tangency(x: Vec, origin: Vec, rot: Vec, rays: list[_Rays]) -> Vec:
+    """Per edge: distance of its viewing ray from the axis minus the radius [px].
+
+    Edges against the pads get their own offset x[6]: their sub-pixel position is biased
+    differently from edges against the backlight (a quarter of the contrast, limb shading).
+    """
+    point, direction = _axis(x, origin, rot)
+    radius = 1e-3 * np.array([x[4], x[5]])
+    out = []
+    for r in rays:
+        n = np.cross(r.direction, direction)
+        dist = np.abs((point - r.centre) @ n.T) / np.linalg.norm(n, axis=1)
+        out.append(r.weight * (dist - radius[r.part] - 1e-3 * x[6] * r.dark))
+    return np.concatenate(out)
+
+
+def _fit_axis(x0: Vec, origin: Vec, rot: Vec, rays: list[_Rays], prior: Vec) -> Vec:
+    def residual(x: Vec) -> Vec:
+        return np.r_[_tangency(x, origin, rot, rays), (x[4:7] - prior) / _PRIOR_MM]
+
+    return least_squares(residual, x0, loss="soft_l1", f_scale=0.3, x_scale=_X_SCALE).x
+
+
+def _tip_silhouette(cam: CameraModel, tip: Vec, direction: Vec, r_j: float, chamfer: float,
+                    columns: Vec) -> Vec:
+    """Row where the chamfered journal end's silhouette ends, at each column (convex frustum)."""
+    a = np.cross(direction, [1.0, 0.0, 0.0] if abs(direction[0]) < 0.9 else [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    ang = np.linspace(0, 2 * np.pi, 180, endpoint=False)
+    ring = np.cos(ang)[:, None] * a + np.sin(ang)[:, None] * np.cross(direction, a)
+    uv = cam.project(np.r_[tip + (r_j - chamfer) * ring, tip - chamfer * direction + r_j * ring])
+    p = uv[cv2.convexHull(uv.astype(np.float32), returnPoints=False).ravel()]
+    q = np.roll(p, -1, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (columns[:, None] - p[None, :, 0]) / (q[None, :, 0] - p[None, :, 0])
+        v = p[None, :, 1] + s * (q[None, :, 1] - p[None, :, 1])
+    v = np.where((s >= 0) & (s <= 1), v, np.nan)
+    return np.nanmax(v, axis=1)
+
+
+def inspect_in_hand(pair: StereoPair, left: NDArray[np.uint8], right: NDArray[np.uint8],
+                    tcp_pos: Vec, tcp_rot: Vec, conductor: ConductorConfig = NOMINAL_CONDUCTOR,
+                    config: InHandConfig = InHandConfig()) -> InHandMeasurement:
+    """Measure the held conductor's journal relative to the TCP from the two inspect images.
+
+    `pair`: the calibrated inspect cameras at the images' size. `tcp_pos`, `tcp_rot`: the TCP
+    pose in the base frame from the measured joint angles through the arm model. Raises
+    ImageError for images that do not fit the cameras, ConductorNotInView when no conductor
+    is between the fingers.
+    """
+    tcp_pos, tcp_rot = np.asarray(tcp_pos, float), np.asarray(tcp_rot, float)
+    cams = (pair.left, pair.right)
+    for cam, image in zip(cams, (left, right)):
+        cam.check_image(image)
+    edges = tuple(find_edges(c, im, tcp_pos, tcp_rot, conductor, config)
+                  for c, im in zip(cams, (left, right)))
+    origin = tcp_pos + config.grasp_height * tcp_rot[:, 2]
+
+    def rays(masks: list[NDArray[np.bool_]]) -> list[_Rays]:
+        out = []
+        for c, e, m in zip(cams, edges, masks):
+            px_per_m = float(c.K[0, 0]) / float(np.linalg.norm(origin - c.pos))
+            out.append(_Rays(c.pos, c.rays(e.uv[m]), e.part[m], e.dark[m],
+                             np.full(int(m.sum()), px_per_m)))
+        return out
+
+    prior = np.array([1e3 * BODY_H6.nominal / 2, 1e3 * JOURNAL_H6.nominal / 2, 0.0])
+    # Backlit edges first (no pads in front of them), then everything within a tightening gate.
+    x = _fit_axis(np.r_[0.0, 0.0, 0.0, 0.0, prior], origin, tcp_rot,
+                  rays([~e.dark for e in edges]), prior)
+    everything = rays([np.ones(len(e.uv), bool) for e in edges])
+    for gate in (6 * config.gate_px, 2 * config.gate_px, config.gate_px):
+        resid = np.split(np.abs(_tangency(x, origin, tcp_rot, everything)), [len(edges[0].uv)])
+        inliers = [r < gate for r in resid]
+        used = rays(inliers)
+        x = _fit_axis(x, origin, tcp_rot, used, prior)
+    point, direction = _axis(x, origin, tcp_rot)
+    r_j = 1e-3 * x[5]
+
+    def tip_residual(t: Vec) -> Vec:
+        tip = point + 1e-3 * t[0] * direction
+        return np.concatenate([
+            e.tip_uv[:, 1] - _tip_silhouette(c, tip, direction, r_j, conductor.tip_chamfer,
+                                             e.tip_uv[:, 0])
+            for c, e in zip(cams, edges)])
+
+    t = least_squares(tip_residual, [1e3 * conductor.journal_length], loss="soft_l1", f_scale=0.5,
+                      diff_step=1e-4).x[0]
+    tip_base = point + 1e-3 * t * direction
+    tip, axis = tcp_rot.T @ (tip_base - tcp_pos), tcp_rot.T @ direction
+    return InHandMeasurement(
+        tip=tip, axis=axis, offset=tip[:2].copy(), tip_z=float(tip[2]),
+        tilt=float(np.arccos(np.clip(axis[2], -1.0, 1.0))),
+        tilt_direction=float(np.arctan2(axis[1], axis[0])), tip_base=tip_base,
+        axis_base=direction, body_diameter=2e-3 * x[4], journal_diameter=2e-3 * x[5],
+        rms_px=float(np.sqrt(np.mean(_tangency(x, origin, tcp_rot, used) ** 2))), edges=edges,
+        inliers=(inliers[0], inliers[1]), conductor=conductor)
