@@ -49,7 +49,7 @@ class StereoPairConfig:
 
 TOP_PAIR = StereoPairConfig(
     name="top", target=(0.60, 0.135, 0.27), centre=(0.60, 0.135, 0.92),
-    baseline_dir=(0.0, 1.0, 0.0), baseline=0.12, focal_length=0.012,
+    baseline_dir=(0.0, 1.0, 0.0), baseline=0.20, focal_length=0.012,
 )
 """Over the tray and the baseplate: finds conductors (step 1) and empty holes (step 2)."""
 INSPECT_PAIR = StereoPairConfig(

@@ -18,8 +18,8 @@ from scipy.spatial.transform import Rotation
 
 from controllers.arm_model import NominalArm
 from controllers.arm_sensors import quantise
-from sim.arm import HOME_Q, Q_MAX, Q_MIN
 from sim import names
+from sim.arm import HOME_Q, Q_MAX, Q_MIN
 from sim.calibration_board import BOARD_BODY, CheckerboardConfig
 from sim.cameras import StereoPairConfig
 from sim.errors import ConfigError

@@ -21,6 +21,9 @@ from vision.checkerboard import find_corners
 from vision.errors import TargetNotFound
 from vision.imaging import Camera, ImagingConfig
 
+FULL_SIZE = ImagingConfig()
+DEFAULT_CELL = SceneConfig()
+
 
 @dataclass(frozen=True)
 class CalibrationRun:
@@ -28,6 +31,8 @@ class CalibrationRun:
     score: dict[str, object]
     seconds: dict[str, float] = field(default_factory=dict)
     views: int = 0
+    observations: tuple[Observation, ...] = ()
+    """The detected corners and measured TCP poses, for re-solving with another lens model."""
 
 
 def _pair_config(cfg: SceneConfig, name: str):
@@ -37,10 +42,11 @@ def _pair_config(cfg: SceneConfig, name: str):
     return pairs[name]
 
 
-def calibrate(name: str, imaging: ImagingConfig = ImagingConfig(), seed: int = 0,
-              scene_config: SceneConfig = SceneConfig(),
-              tick: Callable[[], None] | None = None) -> CalibrationRun:
-    """Run the campaign for pair `name` ('top' or 'inspect') and calibrate it."""
+def calibrate(name: str, imaging: ImagingConfig = FULL_SIZE, seed: int = 0,
+              scene_config: SceneConfig = DEFAULT_CELL,
+              tick: Callable[[], None] | None = None, distortion: str = "k1k2p1p2") -> CalibrationRun:
+    """Run the campaign for pair `name` ('top' or 'inspect') and calibrate it with the lens
+    model `distortion` (see vision.calibration.DISTORTION_TERMS)."""
     pair = _pair_config(scene_config, name)
     board, volume = BOARDS[name], VOLUMES[name]
     scene = build_scene(dataclasses.replace(scene_config, n_conductors=0, calibration_board=board))
@@ -60,13 +66,13 @@ def calibrate(name: str, imaging: ImagingConfig = ImagingConfig(), seed: int = 0
         if tick:
             tick()
     t2 = time.perf_counter()
-    result = calibrate_pair(obs, board, imaging.size, pair.camera_names())
+    result = calibrate_pair(obs, board, imaging.size, pair.camera_names(), distortion)
     t3 = time.perf_counter()
     camera.close()
     truth = StereoPair(*(true_camera(scene.model, scene.data, n, imaging.size) for n in pair.camera_names()))
     score = score_pair(result.pair, truth, _evaluation_points(volume.centre, volume.spread))
     seconds = {"views": t1 - t0, "corners": t2 - t1, "solve": t3 - t2}
-    return CalibrationRun(result, score, seconds, len(views))
+    return CalibrationRun(result, score, seconds, len(views), tuple(obs))
 
 
 def _evaluation_points(centre: tuple[float, ...], spread: tuple[float, ...]) -> np.ndarray:

@@ -31,8 +31,15 @@ from vision.errors import CalibrationError
 
 Pose = tuple[NDArray[np.float64], NDArray[np.float64]]
 """(rotation matrix, translation)."""
-_FLAGS = cv2.CALIB_FIX_K3
 MIN_VIEWS = 6
+DISTORTION_TERMS = {"none": 0, "k1": 1, "k1k2": 2, "k1k2p1p2": 4}
+"""Lens models: how many of OpenCV's (k1, k2, p1, p2) are estimated (the rest held at 0)."""
+_CV_FLAGS = {
+    0: cv2.CALIB_FIX_K1 | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST,
+    1: cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST,
+    2: cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST,
+    4: cv2.CALIB_FIX_K3,
+}
 
 
 @dataclass(frozen=True)
@@ -57,13 +64,13 @@ class PairCalibration:
 
 
 def _camera_init(name: str, obs: list[Observation], side: str, board: CheckerboardConfig,
-                 size: tuple[int, int]) -> tuple[float, NDArray, NDArray, list[int], list[Pose]]:
+                 size: tuple[int, int], n_dist: int) -> tuple[float, NDArray, NDArray, list[int], list[Pose]]:
     idx = [i for i, o in enumerate(obs) if getattr(o, side) is not None]
     if len(idx) < MIN_VIEWS:
         raise CalibrationError(f"camera {name}: board found in {len(idx)} views, need >= {MIN_VIEWS}")
     obj = [board.corner_points().astype(np.float32)] * len(idx)
     img = [getattr(obs[i], side).astype(np.float32) for i in idx]
-    rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(obj, img, size, None, None, flags=_FLAGS)
+    rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(obj, img, size, None, None, flags=_CV_FLAGS[n_dist])
     poses = [(cv2.Rodrigues(r)[0], t.ravel()) for r, t in zip(rvecs, tvecs)]
     return float(rms), K, dist.ravel()[:5], idx, poses
 
@@ -93,32 +100,35 @@ def _registration_init(obs: list[Observation], idx: list[int], board_in_cam: lis
     return r_bc.T, -r_bc.T @ p_bc
 
 
-def _pack(K: NDArray, dist: NDArray, pose: Pose) -> NDArray:
-    return np.r_[K[0, 0], K[1, 1], K[0, 2], K[1, 2], dist[:4], cv2.Rodrigues(pose[0])[0].ravel(), pose[1]]
+def _pack(K: NDArray, dist: NDArray, pose: Pose, n_dist: int) -> NDArray:
+    return np.r_[K[0, 0], K[1, 1], K[0, 2], K[1, 2], dist[:n_dist], cv2.Rodrigues(pose[0])[0].ravel(), pose[1]]
 
 
-def _unpack(p: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+def _unpack(p: NDArray, n_dist: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     K = np.array([[p[0], 0, p[2]], [0, p[1], p[3]], [0, 0, 1.0]])
-    return K, np.r_[p[4:8], 0.0], p[8:11], p[11:14]
+    dist = np.zeros(5)
+    dist[:n_dist] = p[4:4 + n_dist]
+    return K, dist, p[4 + n_dist:7 + n_dist], p[7 + n_dist:10 + n_dist]
 
 
-def _residuals(x: NDArray, obs: list[Observation], corners: NDArray) -> NDArray:
-    cams = (x[:14], x[14:28])
-    r_bt, t_bt = cv2.Rodrigues(x[28:31])[0], x[31:34]
+def _residuals(x: NDArray, obs: list[Observation], corners: NDArray, n_dist: int) -> NDArray:
+    n = 10 + n_dist
+    cams = (x[:n], x[n:2 * n])
+    r_bt, t_bt = cv2.Rodrigues(x[2 * n:2 * n + 3])[0], x[2 * n + 3:2 * n + 6]
     res = []
     for o in obs:
         pts = (corners @ r_bt.T + t_bt) @ o.tcp_rot.T + o.tcp_pos  # board -> TCP -> base
         for cam, uv in zip(cams, (o.left, o.right)):
             if uv is None:
                 continue
-            K, dist, rvec, tvec = _unpack(cam)
+            K, dist, rvec, tvec = _unpack(cam, n_dist)
             proj, _ = cv2.projectPoints(pts, rvec, tvec, K, dist)
             res.append((proj.reshape(-1, 2) - uv).ravel())
     return np.concatenate(res)
 
 
-def _camera_model(name: str, size: tuple[int, int], p: NDArray) -> CameraModel:
-    K, dist, rvec, tvec = _unpack(p)
+def _camera_model(name: str, size: tuple[int, int], p: NDArray, n_dist: int) -> CameraModel:
+    K, dist, rvec, tvec = _unpack(p, n_dist)
     r_cw = cv2.Rodrigues(rvec)[0]
     return CameraModel(name, size, K, dist, r_cw.T, -r_cw.T @ tvec)
 
@@ -139,12 +149,18 @@ def _rectified_row_error(pair: StereoPair, obs: list[Observation]) -> float:
 
 
 def calibrate_pair(obs: list[Observation], board: CheckerboardConfig, size: tuple[int, int],
-                   names: tuple[str, str]) -> PairCalibration:
-    """Calibrate a stereo pair and register it to the arm base frame (module docstring)."""
+                   names: tuple[str, str], distortion: str = "k1k2p1p2") -> PairCalibration:
+    """Calibrate a stereo pair and register it to the arm base frame (module docstring).
+
+    `distortion` is the lens model (a key of DISTORTION_TERMS).
+    """
+    if distortion not in DISTORTION_TERMS:
+        raise CalibrationError(f"distortion model {distortion!r}; valid: {', '.join(DISTORTION_TERMS)}")
+    n_dist = DISTORTION_TERMS[distortion]
     rms: dict[str, float] = {}
     init = {}
     for name, side in zip(names, ("left", "right")):
-        rms[side], K, dist, idx, poses = _camera_init(name, obs, side, board, size)
+        rms[side], K, dist, idx, poses = _camera_init(name, obs, side, board, size, n_dist)
         init[side] = (K, dist, idx, poses)
     both = [o for o in obs if o.left is not None and o.right is not None]
     if len(both) < MIN_VIEWS // 2:
@@ -157,14 +173,16 @@ def calibrate_pair(obs: list[Observation], board: CheckerboardConfig, size: tupl
     board_on_tcp = board.tcp_to_board()
     base_to_cam = {side: _registration_init(obs, init[side][2], init[side][3], board_on_tcp)
                    for side in ("left", "right")}
-    x0 = np.r_[_pack(Kl, dl, base_to_cam["left"]), _pack(Kr, dr, base_to_cam["right"]),
+    x0 = np.r_[_pack(Kl, dl, base_to_cam["left"], n_dist), _pack(Kr, dr, base_to_cam["right"], n_dist),
                cv2.Rodrigues(board_on_tcp[0])[0].ravel(), board_on_tcp[1]]
     corners = board.corner_points()
-    sol = least_squares(_residuals, x0, args=(obs, corners), x_scale="jac", method="lm")
+    sol = least_squares(_residuals, x0, args=(obs, corners, n_dist), x_scale="jac", method="lm")
     if not sol.success:
         raise CalibrationError(f"pair {names}: bundle adjustment did not converge ({sol.message})")
     rms["bundle"] = float(np.sqrt(np.mean(sol.fun**2) * 2))
-    pair = StereoPair(_camera_model(names[0], size, sol.x[:14]), _camera_model(names[1], size, sol.x[14:28]))
-    board_on_tcp = (cv2.Rodrigues(sol.x[28:31])[0], sol.x[31:34])
+    n = 10 + n_dist
+    pair = StereoPair(_camera_model(names[0], size, sol.x[:n], n_dist),
+                      _camera_model(names[1], size, sol.x[n:2 * n], n_dist))
+    board_on_tcp = (cv2.Rodrigues(sol.x[2 * n:2 * n + 3])[0], sol.x[2 * n + 3:2 * n + 6])
     views = {"left": len(init["left"][2]), "right": len(init["right"][2]), "both": len(both)}
     return PairCalibration(pair, board_on_tcp, rms, _rectified_row_error(pair, obs), views)
