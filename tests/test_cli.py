@@ -23,6 +23,8 @@ def run(*args: str) -> subprocess.CompletedProcess:
     (["render", "--camera", "top_left", "--out", "x.png", "--width", "640", "--height", "640"], "4:3"),
     (["validate", "--check", "bogus"], "valid: rim_rest"),
     (["frobnicate"], "invalid choice"),
+    (["vision-check", "--width", "300"], "invalid choice: 300"),
+    (["vision-check", "--poses", "0"], "platform_poses >= 1"),
 ])
 def test_bad_input_is_one_line_exit_2(args, needle):
     r = run(*args)
