@@ -17,7 +17,7 @@ from sim.scene import SceneConfig, build_scene
 from tasks.calibration_views import VOLUMES, take_views
 from vision.calibration import Observation, PairCalibration, calibrate_pair
 from vision.camera import CameraModel, StereoPair, true_camera
-from vision.checkerboard import find_corners
+from vision.checkerboard import draw_corners, find_corners
 from vision.errors import TargetNotFound
 from vision.imaging import Camera, ImagingConfig
 
@@ -44,9 +44,11 @@ def _pair_config(cfg: SceneConfig, name: str):
 
 def calibrate(name: str, imaging: ImagingConfig = FULL_SIZE, seed: int = 0,
               scene_config: SceneConfig = DEFAULT_CELL,
-              tick: Callable[[], None] | None = None, distortion: str = "k1k2p1p2") -> CalibrationRun:
+              tick: Callable[[], None] | None = None, distortion: str = "k1k2p1p2",
+              overlay: Callable[[str, np.ndarray], None] | None = None) -> CalibrationRun:
     """Run the campaign for pair `name` ('top' or 'inspect') and calibrate it with the lens
-    model `distortion` (see vision.calibration.DISTORTION_TERMS)."""
+    model `distortion` (see vision.calibration.DISTORTION_TERMS). `overlay(file_name, image)`,
+    if given, receives the first left frame with its detected corners drawn."""
     pair = _pair_config(scene_config, name)
     board, volume = BOARDS[name], VOLUMES[name]
     scene = build_scene(dataclasses.replace(scene_config, n_conductors=0, calibration_board=board))
@@ -63,6 +65,9 @@ def calibrate(name: str, imaging: ImagingConfig = FULL_SIZE, seed: int = 0,
             except TargetNotFound:
                 corners.append(None)
         obs.append(Observation(view.tcp_rot, view.tcp_pos, corners[0], corners[1]))
+        if overlay is not None and corners[0] is not None:
+            overlay(f"calibration_{name}_left.png", draw_corners(view.left, corners[0], board))
+            overlay = None
         if tick:
             tick()
     t2 = time.perf_counter()

@@ -197,9 +197,12 @@ def run_vision_check(cfg: VisionCheckConfig = VisionCheckConfig(),
     for width in cfg.widths:
         imaging = cfg.imaging(width)
         rng = np.random.default_rng(cfg.seed)
-        top = calibrate("top", imaging, cfg.seed)
+        def overlay(name: str, image: np.ndarray, width: int = width) -> None:
+            _overlay(cfg, f"{width}/{name}", image)
+
+        top = calibrate("top", imaging, cfg.seed, overlay=overlay)
         tick()
-        inspect = calibrate("inspect", imaging, cfg.seed)
+        inspect = calibrate("inspect", imaging, cfg.seed, overlay=overlay)
         tick()
         result = {"calibration": {"top": _calibration_summary(top), "inspect": _calibration_summary(inspect)}}
         result.update(_steps_1_2(cfg, top.calibration.pair, imaging, rng, tick))
