@@ -143,11 +143,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--physics", help="physics config YAML (keys of sim.physics.PhysicsConfig)")
     p.set_defaults(func=cmd_validate)
 
-    from serpar import cmd_control_check, cmd_vision_check, cmd_workspace
+    from serpar import cmd_bench, cmd_control_check, cmd_vision_check, cmd_workspace
 
     cmd_control_check.register(sub)
     cmd_workspace.register(sub)
     cmd_vision_check.register(sub)
+    cmd_bench.register(sub)
     return parser
 
 

@@ -125,6 +125,27 @@ class PressResult:
         return out
 
 
+def press_setup(noise: bool, approach: float = 0.001, seed: int = 0,
+                scene_config: SceneConfig | None = None) -> tuple[Scene, ArmController, np.ndarray]:
+    """A conductor squeezed in the gripper `approach` above the plate top (between four holes),
+    held and tared in the air. Returns the scene, the controller and the TCP position at which
+    the journal would touch the plate."""
+    scene = build_scene(scene_config or SceneConfig(n_conductors=1))
+    scene.reset()
+    m, d = scene.model, scene.data
+    cfg = scene.config.conductor
+    top = d.site_xpos[m.site(names.PLATE + "top_centre").id].copy()  # between four holes
+    contact_tcp = top + np.array([0.0, 0.0, cfg.journal_length + GRASP_HEIGHT])
+    d.qpos[scene.arm_qpos_adr] = solve_tcp_pose(scene, contact_tcp + [0.0, 0.0, approach])
+    put_in_hand(scene, 0, GRASP_HEIGHT)
+    ctrl = ArmController(m, names.ARM, controller_config(noise), seed)
+    ctrl.hold_joints(d.qpos[scene.arm_qpos_adr].copy())
+    d.ctrl[m.actuator(names.ARM + GRIP_ACTUATOR).id] = 20.0  # squeeze per pad [N]
+    _settle(ctrl, scene, 0.3)
+    ctrl.tare()  # in the air, as on the real arm
+    return scene, ctrl, contact_tcp
+
+
 def press(law: ControlLaw, noise: bool = True, force_n: float = 5.0, surface_error: float = 0.0,
           approach: float = 0.001, approach_speed: float = 0.002, contact_n: float = 1.0,
           ramp_s: float = 0.2, hold_s: float = 1.5, seed: int = 0) -> PressResult:
@@ -138,19 +159,8 @@ def press(law: ControlLaw, noise: bool = True, force_n: float = 5.0, surface_err
     Impedance feeds F_d forward only (Eq. 3); direct force-position also feeds the
     estimated force back and moves its reference (Fig. 4).
     """
-    scene = build_scene(SceneConfig(n_conductors=1))
-    scene.reset()
+    scene, ctrl, contact_tcp = press_setup(noise, approach, seed)
     m, d = scene.model, scene.data
-    cfg = scene.config.conductor
-    top = d.site_xpos[m.site(names.PLATE + "top_centre").id].copy()  # between four holes
-    contact_tcp = top + np.array([0.0, 0.0, cfg.journal_length + GRASP_HEIGHT])
-    d.qpos[scene.arm_qpos_adr] = solve_tcp_pose(scene, contact_tcp + [0.0, 0.0, approach])
-    put_in_hand(scene, 0, GRASP_HEIGHT)
-    ctrl = ArmController(m, names.ARM, controller_config(noise), seed)
-    ctrl.hold_joints(d.qpos[scene.arm_qpos_adr].copy())
-    d.ctrl[m.actuator(names.ARM + GRIP_ACTUATOR).id] = 20.0  # squeeze per pad [N]
-    _settle(ctrl, scene, 0.3)
-    ctrl.tare()  # in the air, as on the real arm
     part = body_geoms(m, int(scene.conductor_bodies[0]))
     plate = {g for g in range(m.ngeom) if m.body(m.geom_bodyid[g]).name.startswith(names.PLATE)}
     site = m.site(names.ARM + TCP_SITE).id

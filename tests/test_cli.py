@@ -25,6 +25,7 @@ def run(*args: str) -> subprocess.CompletedProcess:
     (["frobnicate"], "invalid choice"),
     (["vision-check", "--width", "300"], "invalid choice: 300"),
     (["vision-check", "--poses", "0"], "platform_poses >= 1"),
+    (["bench", "--repeats", "0"], "repeats in 1..20"),
 ])
 def test_bad_input_is_one_line_exit_2(args, needle):
     r = run(*args)

@@ -1,0 +1,49 @@
+"""``serpar bench``: physics steps per second of the cell, bare and under the control loop."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from serpar.output import print_json, progress, table
+
+
+def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("bench", help="steps per second of the full cell: bare mj_step (the floor), with "
+                                     "and without sleeping, and serpar's control loop in free motion "
+                                     "and in contact, with its overhead over the floor")
+    p.add_argument("--seconds", type=float, default=0.2, help="simulated seconds per timing (default 0.2)")
+    p.add_argument("--repeats", type=int, default=3, help="timings per figure, best kept (default 3)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_bench)
+    return p
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from tasks.bench import BenchConfig, run_bench
+
+    cfg = BenchConfig(sim_seconds=args.seconds, repeats=args.repeats)
+    bar = progress(5, "bench", enabled=sys.stderr.isatty())
+
+    def tick(name: str) -> None:
+        bar.set_postfix_str(name)
+        bar.update(1)
+
+    report = run_bench(cfg, tick)
+    bar.close()
+    if args.json:
+        print_json(report)
+        return 0
+    print(f"serpar bench  timestep {report['timestep_s'] * 1e3:g} ms, best of {cfg.repeats} x "
+          f"{cfg.sim_seconds:g} s simulated")
+    rows = [[f"bare mj_step: {name.replace('_', ' ')}", f"{r['steps_per_s']:,.0f}", f"{r['realtime_factor']:.2f}", ""]
+            for name, r in report["bare"].items()]
+    for phase in ("free_motion", "in_contact"):
+        r = report[phase]
+        label = phase.replace("_", " ")
+        rows.append([f"control loop, {label}", f"{r['loop']['steps_per_s']:,.0f}",
+                     f"{r['loop']['realtime_factor']:.2f}", f"{r['overhead']:.2f}x"])
+        rows.append(["  bare mj_step from the same state", f"{r['bare']['steps_per_s']:,.0f}",
+                     f"{r['bare']['realtime_factor']:.2f}", ""])
+    print(table(["", "steps/s", "x real time", "loop / bare"], rows))
+    return 0
