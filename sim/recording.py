@@ -1,0 +1,230 @@
+"""Recordings: one schema for simulated and real data (DESIGN.md §4, docs/recording.md).
+
+A recording is a folder with ``meta.json`` and tables in Parquet (default) or CSV:
+``signals`` (time series, libfranka column names where one exists) and optionally
+``measurements`` (static calibration sets). This module writes, reads and validates them;
+it knows nothing about where the numbers came from.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+
+from sim.errors import SimError
+
+SCHEMA_VERSION = 1
+SOURCES = ("sim", "real")
+FORMATS = ("parquet", "csv")
+TABLES = ("signals", "measurements")
+
+_CHANNEL_PATTERNS = (
+    r"time", r"phase",
+    r"q[1-7]", r"dq[1-7]", r"tau_J[1-7]", r"tau_J_d[1-7]",  # libfranka RobotState names
+    r"O_F_ext_hat_K[1-6]",  # libfranka: estimated external wrench at the TCP, base frame
+    r"O_T_EE_(x|y|z)", r"O_T_EE_q(w|x|y|z)",  # TCP pose (libfranka O_T_EE, as position + quaternion)
+    r"leg_cmd[1-6]", r"leg[1-6]",  # Stewart: commanded and measured leg lengths [m]
+    r"platform_(x|y|z)", r"platform_q(w|x|y|z)",  # Stewart platform pose in its base frame
+    r"gripper_width", r"contact_force_(x|y|z)",
+    r"x_[A-Za-z0-9_]+",  # user channels: any name starting with x_
+)
+_CHANNEL_RE = re.compile("|".join(f"(?:{p})" for p in _CHANNEL_PATTERNS))
+KNOWN_CHANNELS_HELP = ("time, phase, q1..7, dq1..7, tau_J1..7, tau_J_d1..7, O_F_ext_hat_K1..6, "
+                       "O_T_EE_x/y/z/qw/qx/qy/qz, leg_cmd1..6, leg1..6, platform_x/y/z/qw/qx/qy/qz, "
+                       "gripper_width, contact_force_x/y/z, x_<anything>")
+
+
+class RecordingError(SimError, ValueError):
+    """A recording that does not follow the schema (one line, naming the problem)."""
+
+
+@dataclass(frozen=True)
+class PhaseSegment:
+    name: str
+    start: float
+    """[s], from the recording's time origin."""
+    end: float
+
+
+@dataclass(frozen=True)
+class RecordingMeta:
+    """``meta.json``: what the tables are and how far to trust them."""
+
+    source: str
+    """'sim' or 'real'."""
+    sample_rate_hz: float
+    channels: tuple[str, ...]
+    noise_sigma: dict[str, float] = field(default_factory=dict)
+    """Per-channel measurement noise, SI units (what 'beyond noise' is judged against)."""
+    phases: tuple[PhaseSegment, ...] = ()
+    model: dict[str, object] = field(default_factory=dict)
+    """The model or config the recording was made with (for a sim) or against (real)."""
+    schema_version: int = SCHEMA_VERSION
+    units: str = "SI"
+
+    def __post_init__(self) -> None:
+        if self.source not in SOURCES:
+            raise RecordingError(f"source {self.source!r}; valid: {', '.join(SOURCES)}")
+        if self.schema_version != SCHEMA_VERSION:
+            raise RecordingError(f"schema version {self.schema_version}; this serpar reads {SCHEMA_VERSION}")
+        if self.units != "SI":
+            raise RecordingError(f"units {self.units!r}; recordings are in SI units")
+        if not self.sample_rate_hz > 0:
+            raise RecordingError(f"sample_rate_hz must be > 0, got {self.sample_rate_hz}")
+        check_channels(self.channels)
+        unknown = sorted(set(self.noise_sigma) - set(self.channels))
+        if unknown:
+            raise RecordingError(f"noise_sigma names channels not recorded: {', '.join(unknown)}")
+        for p in self.phases:
+            if not p.start <= p.end:
+                raise RecordingError(f"phase {p.name!r} ends before it starts ({p.start} > {p.end})")
+
+    def as_json(self) -> dict[str, object]:
+        d = asdict(self)
+        d["channels"] = list(self.channels)
+        d["phases"] = [asdict(p) for p in self.phases]
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict) -> RecordingMeta:
+        try:
+            phases = tuple(PhaseSegment(**p) for p in d.get("phases", []))
+            return cls(source=d["source"], sample_rate_hz=float(d["sample_rate_hz"]),
+                       channels=tuple(d["channels"]), noise_sigma=dict(d.get("noise_sigma", {})),
+                       phases=phases, model=dict(d.get("model", {})),
+                       schema_version=int(d.get("schema_version", -1)), units=d.get("units", "SI"))
+        except (KeyError, TypeError) as exc:
+            raise RecordingError(f"meta.json: missing or malformed field ({exc}); needs source, "
+                                 "sample_rate_hz, channels") from None
+
+
+def check_channels(channels: tuple[str, ...] | list[str]) -> None:
+    """Every name must be a schema channel; 'time' must be present, names unique."""
+    bad = [c for c in channels if not _CHANNEL_RE.fullmatch(c)]
+    if bad:
+        raise RecordingError(f"unknown channel(s) {', '.join(bad)}; valid: {KNOWN_CHANNELS_HELP}")
+    if "time" not in channels:
+        raise RecordingError("the signals need a 'time' channel [s]")
+    if len(set(channels)) != len(channels):
+        raise RecordingError("channel names repeat")
+
+
+@dataclass(frozen=True)
+class Recording:
+    meta: RecordingMeta
+    signals: pa.Table
+    measurements: pa.Table | None = None
+
+    def column(self, name: str) -> np.ndarray:
+        if name not in self.signals.column_names:
+            raise RecordingError(f"no channel {name!r}; recorded: {', '.join(self.signals.column_names)}")
+        return self.signals.column(name).to_numpy()
+
+    def phase(self, name: str) -> pa.Table:
+        """Rows of the signals within the named phase segment(s)."""
+        segs = [p for p in self.meta.phases if p.name == name]
+        if not segs:
+            raise RecordingError(f"no phase {name!r}; recorded: {', '.join(sorted({p.name for p in self.meta.phases}))}")
+        t = self.column("time")
+        mask = np.zeros(len(t), bool)
+        for p in segs:
+            mask |= (t >= p.start) & (t <= p.end)
+        return self.signals.filter(pa.array(mask))
+
+
+def write_recording(folder: str | Path, recording: Recording, fmt: str = "parquet") -> Path:
+    """Write `recording` into `folder` (created); returns the folder."""
+    if fmt not in FORMATS:
+        raise RecordingError(f"format {fmt!r}; valid: {', '.join(FORMATS)}")
+    _check_signals(recording.meta, recording.signals)
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "meta.json").write_text(json.dumps(recording.meta.as_json(), indent=2))
+    tables = {"signals": recording.signals, "measurements": recording.measurements}
+    for name, table in tables.items():
+        if table is None:
+            continue
+        if fmt == "parquet":
+            pq.write_table(table, out / f"{name}.parquet")
+        else:
+            pacsv.write_csv(table, out / f"{name}.csv")
+    return out
+
+
+def read_recording(folder: str | Path) -> Recording:
+    """Read and validate a recording folder."""
+    src = Path(folder)
+    if not (src / "meta.json").is_file():
+        raise RecordingError(f"{src} is not a recording: no meta.json")
+    try:
+        meta = RecordingMeta.from_json(json.loads((src / "meta.json").read_text()))
+    except json.JSONDecodeError as exc:
+        raise RecordingError(f"{src / 'meta.json'} is not valid JSON: {exc.msg} (line {exc.lineno})") from None
+    tables: dict[str, pa.Table | None] = {}
+    for name in TABLES:
+        parquet, csv = src / f"{name}.parquet", src / f"{name}.csv"
+        if parquet.is_file():
+            tables[name] = pq.read_table(parquet)
+        elif csv.is_file():
+            tables[name] = pacsv.read_csv(csv)
+        else:
+            tables[name] = None
+    if tables["signals"] is None:
+        raise RecordingError(f"{src} has no signals.parquet or signals.csv")
+    _check_signals(meta, tables["signals"])
+    return Recording(meta, tables["signals"], tables["measurements"])
+
+
+def _check_signals(meta: RecordingMeta, signals: pa.Table) -> None:
+    cols = signals.column_names
+    if list(cols) != list(meta.channels):
+        missing = sorted(set(meta.channels) - set(cols))
+        extra = sorted(set(cols) - set(meta.channels))
+        raise RecordingError(f"signals columns differ from meta.json channels (missing: {', '.join(missing) or '-'}; "
+                             f"not in meta: {', '.join(extra) or '-'})")
+    t = signals.column("time").to_numpy()
+    if len(t) > 1 and not np.all(np.diff(t) > 0):
+        raise RecordingError("time must increase strictly")
+
+
+class SignalRecorder:
+    """Collects rows of named channels (preallocated numeric columns, growing by doubling);
+    the 'phase' channel, if recorded, holds strings."""
+
+    def __init__(self, channels: tuple[str, ...], capacity: int = 4096) -> None:
+        check_channels(channels)
+        self.channels = channels
+        self._n = 0
+        self._numeric = {c: np.empty(max(capacity, 1)) for c in channels if c != "phase"}
+        self._phase: list[str] = []
+
+    def append(self, values: dict[str, float | str]) -> None:
+        """One sample: a value for every channel (a missing or unknown name is an error)."""
+        if set(values) != set(self.channels):
+            missing = sorted(set(self.channels) - set(values))
+            extra = sorted(set(values) - set(self.channels))
+            raise RecordingError(f"sample channels differ (missing: {', '.join(missing) or '-'}; "
+                                 f"unknown: {', '.join(extra) or '-'})")
+        if self._n == len(next(iter(self._numeric.values()))):
+            for c, col in self._numeric.items():
+                self._numeric[c] = np.concatenate([col, np.empty(len(col))])
+        for c, col in self._numeric.items():
+            col[self._n] = float(values[c])  # type: ignore[arg-type]
+        if "phase" in values:
+            self._phase.append(str(values["phase"]))
+        self._n += 1
+
+    def __len__(self) -> int:
+        return self._n
+
+    def table(self) -> pa.Table:
+        cols = {c: (pa.array(self._phase, pa.string()) if c == "phase" else pa.array(self._numeric[c][:self._n]))
+                for c in self.channels}
+        return pa.table(cols)
