@@ -1,0 +1,112 @@
+"""What one assembly episode is (issue 5): a frozen, validated config, the fixed outcome
+taxonomy, and the success-rate interval. YAML only at the command-line edge
+(`sim.config_io.load_yaml_config(EpisodeConfig, path)`, unknown keys rejected)."""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from assets import asset_path
+from sim.errors import ConfigError
+from sim.tolerances import DISTRIBUTIONS
+
+CONTROLLERS = ("force_position", "impedance")
+ERROR_MODES = ("table5", "random", "none")
+CAMERA_WIDTHS = (2048, 1024)
+N_HOLES = 36
+
+
+class Outcome(enum.Enum):
+    """How one hole ended: success or exactly one failure type."""
+
+    SUCCESS = "success"
+    VISION_MISS = "vision_miss"
+    GRASP_FAIL = "grasp_fail"
+    ALIGN_FAIL = "align_fail"
+    JAM = "jam"
+    OVERFORCE = "overforce"
+    TIMEOUT = "timeout"
+    DROPPED = "dropped"
+
+
+def table5_errors() -> np.ndarray:
+    """(6, 7) seed 000 Table 5 errors in metres: per leg dl, dP xyz, dB xyz."""
+    rows = np.loadtxt(asset_path("stewart", "table5_errors.csv"), delimiter=",", comments="#", skiprows=3)
+    return rows[:, 1:] * 1e-3
+
+
+@dataclass(frozen=True)
+class HiddenStewartErrors:
+    """Geometric errors of the simulated platform that its own model does not know."""
+
+    mode: str = "table5"
+    """'table5': seed 000's identified errors of the real cell; 'random': drawn per seed with
+    Table 5's RMS per column; 'none': perfect geometry."""
+    scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.mode not in ERROR_MODES:
+            raise ConfigError(f"hidden_errors.mode {self.mode!r}; valid: {', '.join(ERROR_MODES)}")
+        if not 0 <= self.scale <= 20:
+            raise ConfigError(f"hidden_errors.scale {self.scale}: valid 0..20")
+
+    def draw(self, seed: int) -> np.ndarray:
+        """(6, 7) errors [m] for an episode with `seed`."""
+        table = table5_errors()
+        if self.mode == "none":
+            return np.zeros_like(table)
+        if self.mode == "table5":
+            return self.scale * table
+        rms = np.sqrt(np.mean(table**2, axis=0))
+        return self.scale * rms * np.random.default_rng(seed).standard_normal(table.shape)
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    seed: int = 0
+    holes: tuple[int, ...] | int = N_HOLES
+    """How many holes to fill (the empty ones vision finds, in order), or which ones."""
+    controller: str = "force_position"
+    stewart_correction: bool = True
+    """Step 5 on; off = the serial robot alone."""
+    stewart_calibration: str | None = None
+    """Identified Stewart parameters (a `serpar calibrate stewart --out` file); None = nominal model."""
+    hidden_errors: HiddenStewartErrors = field(default_factory=HiddenStewartErrors)
+    sensor_noise: bool = True
+    tolerance_distribution: str = "uniform"
+    camera_width: int = 2048
+    damage_force_n: float = 20.0
+    hole_time_limit_s: float = 10.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool):
+            raise ConfigError(f"seed must be an integer, got {self.seed!r}")
+        if isinstance(self.holes, int):
+            if not 1 <= self.holes <= N_HOLES:
+                raise ConfigError(f"holes={self.holes}: a count in 1..{N_HOLES} or a list of hole indices")
+        elif not self.holes or any(not 0 <= h < N_HOLES for h in self.holes) or len(set(self.holes)) != len(self.holes):
+            raise ConfigError(f"holes {self.holes}: distinct indices in 0..{N_HOLES - 1}")
+        if self.controller not in CONTROLLERS:
+            raise ConfigError(f"controller {self.controller!r}; valid: {', '.join(CONTROLLERS)}")
+        if self.tolerance_distribution not in DISTRIBUTIONS:
+            raise ConfigError(f"tolerance_distribution {self.tolerance_distribution!r}; valid: {', '.join(DISTRIBUTIONS)}")
+        if self.camera_width not in CAMERA_WIDTHS:
+            raise ConfigError(f"camera_width {self.camera_width}; valid: {', '.join(map(str, CAMERA_WIDTHS))}")
+        if not 1 <= self.damage_force_n <= 200 or not 0.5 <= self.hole_time_limit_s <= 120:
+            raise ConfigError("damage_force_n in 1..200 N, hole_time_limit_s in 0.5..120 s")
+        if self.stewart_calibration is not None and not self.stewart_correction:
+            raise ConfigError("stewart_calibration is given but stewart_correction is off: it would be unused")
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """95 % (by default) Wilson score interval of a success rate."""
+    if n <= 0 or not 0 <= successes <= n:
+        raise ConfigError(f"wilson_interval: need 0 <= successes <= n and n > 0, got {successes}/{n}")
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return max(0.0, centre - half), min(1.0, centre + half)
