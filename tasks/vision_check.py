@@ -25,13 +25,7 @@ from tasks.vision_inhand_scenes import (
     random_grasp_error,
     true_in_hand,
 )
-from tasks.vision_scenes import (
-    make_scene,
-    random_offset,
-    truth_conductor_tops,
-    truth_holes,
-    truth_occupancy,
-)
+from tasks.vision_scenes import hole_errors, make_scene, random_offset, tray_match
 from vision.camera import StereoPair
 from vision.errors import VisionError
 from vision.imaging import Camera, ImagingConfig
@@ -116,28 +110,16 @@ def _steps_1_2(cfg: VisionCheckConfig, pair: StereoPair, imaging: ImagingConfig,
             tick()
             continue
         t_step1, t_step2 = t_step1 + t1 - t0, t_step2 + t2 - t1
-        centres, axes = truth_holes(scene)
-        occupied = truth_occupancy(scene)
-        for h in plate.holes:
-            total += 1
-            if h.status == "unseen":
-                continue
-            correct += (h.status == "occupied") == bool(occupied[h.index])
-            hole_err.append(float(np.linalg.norm(h.centre - centres[h.index])))
-            axis_err.append(float(np.degrees(np.arccos(np.clip(h.axis @ axes[h.index], -1, 1)))))
-            if h.raw is not None:
-                raw_err.append(float(np.linalg.norm(h.raw - centres[h.index])))
+        errors = hole_errors(scene, plate)
+        total += len(plate.holes)
+        correct += int(errors.status_right.sum())
+        hole_err += errors.centre.tolist()
+        axis_err += [errors.axis_deg] * len(errors.centre)
+        raw_err += errors.raw.tolist()
         in_tray = sorted(set(range(scene_cfg.n_conductors)) - set(conductors.tolist()))
-        tops = truth_conductor_tops(scene, in_tray)
-        seen = np.array([s.top for s in sightings]).reshape(-1, 3)
-        if len(seen):
-            dist = np.linalg.norm(tops[:, None] - seen[None], axis=2)
-            nearest = dist.min(axis=1)
-            tray_err += nearest[nearest < 1e-3].tolist()
-            missed += int((nearest >= 1e-3).sum())
-            false_pos += int((dist.min(axis=0) >= 1e-3).sum())
-        else:
-            missed += len(tops)
+        found, n_missed, n_false = tray_match(scene, sightings, in_tray)
+        tray_err += found.tolist()
+        missed, false_pos = missed + n_missed, false_pos + n_false
         if k == 0:
             _overlay(cfg, f"{imaging.width}/step2_plate_left.png", draw_plate(left, plate, pair.left))
             _overlay(cfg, f"{imaging.width}/step1_tray_left.png", draw_conductors(left, sightings, pair.left))
@@ -160,11 +142,10 @@ def _step_4(cfg: VisionCheckConfig, pair: StereoPair, imaging: ImagingConfig, rn
     scene = build_scene(SceneConfig(seed=cfg.seed, n_conductors=1))
     offset_err, tilt_err, tip_err, seconds = [], [], [], 0.0
     failures: list[str] = []
+    camera = Camera(scene.model, imaging, seed=int(rng.integers(1 << 31)))
     for k in range(cfg.inhand_trials):
         pose_inspect_with_error(scene, random_grasp_error(rng))
-        camera = Camera(scene.model, imaging, seed=int(rng.integers(1 << 31)))
         frames = camera.shoot(scene.data, INSPECT)
-        camera.close()
         tcp_pos, tcp_rot = measured_tcp(scene)
         t0 = time.perf_counter()
         try:
@@ -182,6 +163,7 @@ def _step_4(cfg: VisionCheckConfig, pair: StereoPair, imaging: ImagingConfig, rn
         if k == 0:
             _overlay(cfg, f"{imaging.width}/step4_inhand_left.png", draw_in_hand(frames[INSPECT[0]], m, pair.left))
         tick()
+    camera.close()
     return {"offset_error_mm": _stats(offset_err, 1e3), "tip_error_mm": _stats(tip_err, 1e3),
             "tilt_error_deg": _stats(np.degrees(tilt_err)),
             "trials": cfg.inhand_trials, "failures": failures,

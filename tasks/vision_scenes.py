@@ -170,19 +170,51 @@ class PlateScore:
     seen: int
 
 
-def score_plate(scene: Scene, measurement: PlateMeasurement) -> PlateScore:
-    """Scoring only: a plate measurement against the hole sites."""
+@dataclass(frozen=True)
+class HoleErrors:
+    """Per seen hole [m]: centre error, its part across the hole axis, the hole's own raw
+    triangulation error (holes that have one), and whether its empty/occupied status is right."""
+
+    centre: np.ndarray
+    lateral: np.ndarray
+    raw: np.ndarray
+    status_right: np.ndarray
+    axis_deg: float
+
+
+def hole_errors(scene: Scene, measurement: PlateMeasurement) -> HoleErrors:
+    """Scoring only: every seen hole of a plate measurement against the hole sites."""
     centres, axes = truth_holes(scene)
     occupied = truth_occupancy(scene)
     seen = [h for h in measurement.holes if h.status != "unseen"]
-    err = np.array([h.centre - centres[h.index] for h in seen])
+    err = np.array([h.centre - centres[h.index] for h in seen]).reshape(-1, 3)
     along = err @ axes[0]
-    norm = np.linalg.norm(err, axis=1)
     lateral = np.linalg.norm(err - np.outer(along, axes[0]), axis=1)
+    raw = np.array([np.linalg.norm(h.raw - centres[h.index]) for h in seen if h.raw is not None])
+    right = np.array([(h.status == "occupied") == occupied[h.index] for h in seen], bool)
     angle = float(np.degrees(np.arccos(np.clip(measurement.normal @ axes[0], -1.0, 1.0))))
-    right = np.mean([(h.status == "occupied") == occupied[h.index] for h in seen])
-    return PlateScore(float(norm.mean()), float(np.percentile(norm, 95)), float(norm.max()),
-                      float(np.percentile(lateral, 95)), angle, float(right), len(seen))
+    return HoleErrors(np.linalg.norm(err, axis=1), lateral, raw, right, angle)
+
+
+def score_plate(scene: Scene, measurement: PlateMeasurement) -> PlateScore:
+    """Scoring only: a plate measurement against the hole sites, summarised."""
+    e = hole_errors(scene, measurement)
+    return PlateScore(float(e.centre.mean()), float(np.percentile(e.centre, 95)), float(e.centre.max()),
+                      float(np.percentile(e.lateral, 95)), e.axis_deg, float(e.status_right.mean()),
+                      len(e.centre))
+
+
+def tray_match(scene: Scene, sightings: Sequence[ConductorSighting], in_tray: Sequence[int],
+               tol: float = 1e-3) -> tuple[np.ndarray, int, int]:
+    """Scoring only: for the conductors `in_tray`, the distance of each found top to its nearest
+    sighting (those within `tol`), how many were missed, and how many sightings match none."""
+    tops = truth_conductor_tops(scene, list(in_tray))
+    seen = np.array([s.top for s in sightings]).reshape(-1, 3)
+    if len(seen) == 0:
+        return np.zeros(0), len(tops), 0
+    dist = np.linalg.norm(tops[:, None] - seen[None], axis=2)
+    nearest = dist.min(axis=1)
+    return nearest[nearest < tol], int((nearest >= tol).sum()), int((dist.min(axis=0) >= tol).sum())
 
 
 @dataclass(frozen=True)

@@ -18,11 +18,10 @@ from tasks.vision_inhand_scenes import (
     true_in_hand,
 )
 from tasks.vision_scenes import (
+    hole_errors,
     make_scene,
     random_offset,
-    truth_conductor_tops,
-    truth_holes,
-    truth_occupancy,
+    tray_match,
 )
 from vision.imaging import Camera, ImagingConfig
 from vision.inhand import inspect_in_hand
@@ -63,15 +62,12 @@ def test_holes_and_tray_with_calibrated_cameras(calibrated_top):
         scene = make_scene(cfg, random_offset(cfg, rng), seated)
         frames = Camera(scene.model, ImagingConfig(), seed=200 + k).shoot(scene.data, TOP)
         plate = locate_holes(pair, frames[TOP[0]], frames[TOP[1]], cfg.baseplate, cfg.conductor, plate_layout(cfg))
-        centres, _ = truth_holes(scene)
-        occupied = truth_occupancy(scene)
-        assert all(h.status != "unseen" for h in plate.holes)
-        assert all((h.status == "occupied") == bool(occupied[h.index]) for h in plate.holes)
-        errors += [np.linalg.norm(h.centre - centres[h.index]) for h in plate.holes]
+        scored = hole_errors(scene, plate)
+        assert len(scored.centre) == 36 and scored.status_right.all()  # every hole seen, classified right
+        errors += scored.centre.tolist()
         sightings = locate_conductors(pair, frames[TOP[0]], frames[TOP[1]], tray_region(cfg), cfg.conductor)
-        tops = truth_conductor_tops(scene, sorted(set(range(36)) - set(seated)))
-        assert len(sightings) == len(tops)
-        seen = np.array([s.top for s in sightings])
-        tray_errors += np.linalg.norm(tops[:, None] - seen[None], axis=2).min(axis=1).tolist()
+        found, missed, false = tray_match(scene, sightings, sorted(set(range(36)) - set(seated)), tol=0.1e-3)
+        assert missed == 0 and false == 0, f"{missed} tray tops beyond 0.1 mm or unseen, {false} false"
+        tray_errors += found.tolist()
     assert np.percentile(errors, 95) <= 0.05e-3, f"hole p95 {np.percentile(errors, 95) * 1e3:.4f} mm"
     assert max(tray_errors) <= 0.1e-3, f"tray max {max(tray_errors) * 1e3:.4f} mm"
