@@ -31,9 +31,10 @@ from vision.errors import VisionError
 from vision.imaging import Camera, ImagingConfig
 from vision.inhand import inspect_in_hand
 from vision.inhand_overlay import draw_in_hand
+from vision.layout import plate_layout, tray_region
 from vision.overlay import draw_conductors, draw_plate
-from vision.plate import locate_holes, plate_layout
-from vision.tray import locate_conductors, tray_region
+from vision.plate import locate_holes
+from vision.tray import locate_conductors
 
 TOP, INSPECT = ("top_left", "top_right"), ("inspect_left", "inspect_right")
 

@@ -25,8 +25,9 @@ from tasks.vision_scenes import (
 )
 from vision.imaging import Camera, ImagingConfig
 from vision.inhand import inspect_in_hand
-from vision.plate import locate_holes, plate_layout
-from vision.tray import locate_conductors, tray_region
+from vision.layout import plate_layout, tray_region
+from vision.plate import locate_holes
+from vision.tray import locate_conductors
 
 pytestmark = pytest.mark.xdist_group("calibrated")
 INSPECT = ("inspect_left", "inspect_right")

@@ -128,6 +128,6 @@ def test_overlay_draws_on_a_copy(full_res):
 
 def test_vision_code_reads_no_simulator_state():
     for module in ("inhand.py", "inhand_edges.py", "inhand_overlay.py", "plate.py", "plate_detect.py",
-                   "tray.py", "overlay.py", "calibration.py", "checkerboard.py"):
+                   "tray.py", "layout.py", "overlay.py", "calibration.py", "checkerboard.py"):
         source = (Path(vision.inhand.__file__).parent / module).read_text()
         assert "mujoco" not in source and "MjData" not in source

@@ -19,8 +19,9 @@ from tasks.vision_scenes import make_scene, random_offset, score_plate, score_tr
 from vision.camera import StereoPair, true_camera
 from vision.errors import ConductorNotInView, HoleNotVisible, ImageError, PlateNotFound
 from vision.imaging import Camera, ImagingConfig
-from vision.plate import locate_holes, plate_layout
-from vision.tray import locate_conductors, tray_pockets, tray_region
+from vision.layout import plate_layout, tray_pockets, tray_region
+from vision.plate import locate_holes
+from vision.tray import locate_conductors
 
 CFG = SceneConfig()
 SEEDS = (101, 202)

@@ -33,10 +33,10 @@ from sim.conductor import ConductorConfig
 from sim.scene import SceneConfig
 from vision.camera import StereoPair
 from vision.errors import HoleNotVisible, PlateNotFound
+from vision.layout import BoxRegion, PlateLayout, plate_layout
 from vision.plate_detect import PlateVisionConfig, find_dark_discs, measure_edge
 from vision.tray import (
     BODY_DIAMETER,
-    BoxRegion,
     expected_diameter_px,
     find_brass_tops,
     grey,
@@ -49,34 +49,6 @@ HoleStatus = Literal["empty", "occupied", "unseen"]
 NOMINAL_CELL = SceneConfig()
 NOMINAL_PLATE = BaseplateConfig()
 NOMINAL_CONDUCTOR = ConductorConfig()
-
-
-@dataclass(frozen=True)
-class PlateLayout:
-    """Where the plate is nominally (cell layout, not a measurement): the plate frame of
-    :mod:`sim.baseplate` (bottom-face centre, z up) at the Stewart home pose, and how far the
-    platform may carry it from there."""
-
-    origin: tuple[float, float, float]
-    rotation: tuple[tuple[float, ...], ...] = ((1.0, 0, 0), (0, 1.0, 0), (0, 0, 1.0))
-    travel: float = 0.015
-    """Largest plate displacement from nominal in any direction [m]."""
-
-    def region(self, plate: BaseplateConfig, above: float = 0.0) -> BoxRegion:
-        """Base-frame box holding the plate's top face (raised by `above`), with the travel
-        and a few degrees of tilt as slack."""
-        half = np.array([plate.cols * plate.pitch / 2 + plate.margin,
-                         plate.rows * plate.pitch / 2 + plate.margin, 0.0])
-        rot = np.asarray(self.rotation)
-        top = np.asarray(self.origin) + rot[:, 2] * (plate.thickness + above)
-        extent = np.abs(rot) @ half + self.travel + 0.1 * half.max()
-        return BoxRegion(tuple(top - extent), tuple(top + extent))
-
-
-def plate_layout(cfg: SceneConfig = NOMINAL_CELL, travel: float = 0.015) -> PlateLayout:
-    """Nominal plate frame from the cell layout: Stewart base + home height + platform disc."""
-    x, y, z = cfg.stewart_base
-    return PlateLayout((x, y, z + cfg.stewart.home_z + cfg.stewart.platform_thickness), travel=travel)
 
 
 @dataclass(frozen=True)

@@ -26,49 +26,13 @@ from sim.conductor import ConductorConfig
 from sim.scene import SceneConfig
 from vision.camera import CameraModel, StereoPair
 from vision.errors import ConductorNotInView
+from vision.layout import BoxRegion
 
 Vec = NDArray[np.float64]
 BODY_DIAMETER = 5.0e-3
 """Nominal conductor body diameter [m] (seed 000 Table 1)."""
 NOMINAL_CELL = SceneConfig()
 NOMINAL_CONDUCTOR = ConductorConfig()
-
-
-@dataclass(frozen=True)
-class BoxRegion:
-    """Axis-aligned box in the base frame: where a detection may lie [m]."""
-
-    low: tuple[float, float, float]
-    high: tuple[float, float, float]
-
-    def contains(self, points: Vec) -> NDArray[np.bool_]:
-        p = np.atleast_2d(points)
-        return np.all((p >= np.asarray(self.low)) & (p <= np.asarray(self.high)), axis=1)
-
-    def corners(self) -> Vec:
-        lo, hi = np.asarray(self.low), np.asarray(self.high)
-        return np.array([[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]]
-                         for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-
-    def pixel_window(self, camera: CameraModel, pad: int = 20) -> tuple[int, int, int, int]:
-        """(x0, y0, x1, y1) of the box's projection in `camera`, padded, clipped to the image."""
-        uv = camera.project(self.corners())
-        w, h = camera.size
-        x0, y0 = np.floor(uv.min(axis=0)).astype(int) - pad
-        x1, y1 = np.ceil(uv.max(axis=0)).astype(int) + pad
-        return max(0, x0), max(0, y0), min(w, x1), min(h, y1)
-
-
-def tray_region(cfg: SceneConfig = NOMINAL_CELL, margin: float = 0.004) -> BoxRegion:
-    """Where conductor tops can be in the tray: its nominal footprint (cell layout, not a
-    measurement), from the tray face to above the tallest upright part."""
-    tray = cfg.tray
-    tx, ty, _ = cfg.tray_position
-    hx = tray.cols * tray.pitch / 2 + tray.margin + margin
-    hy = tray.rows * tray.pitch / 2 + tray.margin + margin
-    face = cfg.tray_height + tray.thickness
-    top = face + tray.support_height + cfg.conductor.body_length
-    return BoxRegion((tx - hx, ty - hy, face), (tx + hx, ty + hy, top + 0.006))
 
 
 def grey(image: np.ndarray) -> NDArray[np.float32]:
@@ -186,12 +150,6 @@ class ConductorSighting:
     reprojection_px: float
     pocket: int | None
     """Nearest tray pocket of the nominal layout (row-major), None when none is within 3 mm."""
-
-
-def tray_pockets(cfg: SceneConfig = NOMINAL_CELL) -> Vec:
-    """Nominal pocket centres (n, 2) in the base frame's xy, row-major (cell layout)."""
-    tx, ty, _ = cfg.tray_position
-    return cfg.tray.pocket_centres().reshape(-1, 2) + (tx, ty)
 
 
 def fit_plane(points: Vec, up: Vec) -> tuple[Vec, Vec]:
