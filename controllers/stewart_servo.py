@@ -67,11 +67,14 @@ class StewartServo:
 
     @classmethod
     def from_model(cls, model: mujoco.MjModel, geometry: StewartGeometry, prefix: str = "",
-                   hinge_definition: HingeDefinition = "deflection") -> StewartServo:
+                   hinge_definition: HingeDefinition = "deflection",
+                   match_tol: float = GEOMETRY_MATCH_TOL) -> StewartServo:
         """Look the ids up once (prefix "stewart/" in the cell, "" standalone).
 
-        Raises ConfigError if the model's joint sites or stroke differ from the geometry:
-        the IK would then command the wrong robot.
+        Raises ConfigError if the model's joint sites differ from the geometry by more than
+        `match_tol` [m] or its stroke differs: the IK would then command another robot. A
+        platform built with hidden joint errors is commanded through its (nominal or
+        calibrated) model with `match_tol` set to the errors' bound.
         """
         acts = tuple(_id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{prefix}leg{i}")
                      for i in range(1, N_LEGS + 1))
@@ -80,7 +83,7 @@ class StewartServo:
         joints = np.array([model.site_pos[_id(model, mujoco.mjtObj.mjOBJ_SITE,
                                               f"{prefix}p_joint{i}")]
                            for i in range(1, N_LEGS + 1)]) - model.site_pos[site]
-        if np.max(np.abs(joints - geometry.P)) > GEOMETRY_MATCH_TOL:
+        if np.max(np.abs(joints - geometry.P)) > match_tol:
             raise ConfigError("model platform joints differ from the geometry's P by "
                               f"{np.max(np.abs(joints - geometry.P)):.3g} m")
         hi = float(model.actuator_ctrlrange[acts[0], 1])

@@ -1,4 +1,5 @@
-"""Interpolated Cartesian motions: minimum-jerk straight lines with fixed orientation."""
+"""Interpolated Cartesian motions: minimum-jerk straight lines, with fixed orientation or a
+rotation about one axis."""
 
 from __future__ import annotations
 
@@ -7,7 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from controllers.arm_laws import CartesianTarget
+from controllers.arm_laws import CartesianTarget, orientation_error
+from controllers.rotations import so3_exp
 from sim.errors import ConfigError
 
 Vec = NDArray[np.float64]
@@ -43,3 +45,34 @@ class LineMove:
         return CartesianTarget(self.start + p * delta, self.rot,
                                np.concatenate([v / self.duration * delta, zeros]),
                                np.concatenate([a / self.duration**2 * delta, zeros]))
+
+
+@dataclass(frozen=True, eq=False)
+class PoseMove:
+    """Straight TCP line and a rotation about one fixed axis (the geodesic), both on the same
+    minimum-jerk profile: the move ends at rest in position and orientation."""
+
+    start: Vec
+    goal: Vec
+    start_rot: Vec
+    goal_rot: Vec
+    duration: float
+
+    def __post_init__(self) -> None:
+        if not self.duration > 0:
+            raise ConfigError(f"duration={self.duration} s must be > 0")
+
+    @property
+    def rotation_vector(self) -> Vec:
+        """Rotation taking start_rot to goal_rot, in the base frame [rad]."""
+        return orientation_error(self.start_rot, self.goal_rot)
+
+    def at(self, t: float) -> CartesianTarget:
+        p, v, a = min_jerk(t / self.duration)
+        delta = np.asarray(self.goal) - np.asarray(self.start)
+        turn = self.rotation_vector
+        rot = so3_exp(p * turn) @ self.start_rot
+        return CartesianTarget(self.start + p * delta, rot,
+                               np.concatenate([v / self.duration * delta, v / self.duration * turn]),
+                               np.concatenate([a / self.duration**2 * delta,
+                                               a / self.duration**2 * turn]))

@@ -26,3 +26,8 @@ class LimitError(SimError, ValueError):
     The message names the limit and its valid range, e.g.
     "leg 3 stroke 52.1 mm outside [0, 50.8] mm".
     """
+
+
+class UnstableSimulation(SimError, RuntimeError):
+    """The integration broke down (NaN state, a MuJoCo warning, a constraint blow-up): the
+    message names the reason and the simulated time."""

@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 
 from sim import names
-from sim.arm import ACTUATOR_NAMES, HOME_Q, JOINT_NAMES, build_arm_spec
+from sim.arm import ACTUATOR_NAMES, HOME_Q, JOINT_NAMES, PAD_GEOMS, build_arm_spec
 from sim.baseplate import BaseplateConfig, build_baseplate_spec
 from sim.calibration_board import CheckerboardConfig, add_board
 from sim.cameras import DEFAULT_PAIRS, SENSOR_PIXELS, StereoPairConfig, add_stereo_pair
@@ -114,6 +114,11 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
     _add_environment(spec, cfg)
     world = spec.worldbody
     spec.attach(build_arm_spec(), prefix=names.ARM, frame=world.add_frame(pos=[0, 0, 0]))
+    for pad in PAD_GEOMS:
+        # Friction is a damper on slip velocity with rate 2/timeconst: a held part slides along the
+        # pads by ~(hand speed)/rate on every move, so the pads take the stiffest stable time
+        # constant (0.6 mm per 0.2 m move at 0.01 s, 6 um at 2 dt; assets/arm/README.md).
+        spec.geom(names.ARM + pad).solref = list(cfg.physics.precision_solref)
     if cfg.calibration_board is not None:
         add_board(spec, cfg.calibration_board)
     spec.attach(build_stewart_spec(cfg.stewart, cfg.physics), prefix=names.STEWART,

@@ -32,6 +32,7 @@ from controllers.rotations import quat_to_rot
 from controllers.stewart_kinematics import (
     N_LEGS,
     StewartGeometry,
+    forward_kinematics,
     inverse_kinematics,
     jacobian,
     singularity_measure,
@@ -40,10 +41,13 @@ from sim.errors import ConfigError
 from sim.physics import PhysicsConfig
 from sim.stewart_table import load_joint_table, table_geometry
 
-__all__ = ["N_LEGS", "StewartConfig", "build_stewart_spec", "home_strokes", "leg_space_masses",
+__all__ = ["N_LEGS", "StewartConfig", "build_stewart_spec", "built_geometry", "home_strokes",
+           "initial_pose", "leg_space_masses",
            "load_joint_table", "loop_site_ids", "loop_violation", "spherical_angles_deg",
            "stewart_geometry", "stroke_for_pose"]
 
+MAX_JOINT_ERROR = 0.01
+"""Largest hidden joint or leg-length error accepted [m] (seed 000 simulates +-5 mm)."""
 CYL_RGBA = (0.55, 0.56, 0.58, 1.0)  # anodised grey motor/cylinder housing
 ROD_RGBA = (0.20, 0.40, 0.80, 1.0)  # blue piston rod
 PLATFORM_RGBA = (0.45, 0.47, 0.50, 1.0)  # grey anodised aluminium: the bright plate stands out
@@ -89,8 +93,21 @@ class StewartConfig:
     platform_thickness: float = 0.020
     base_radius: float = 0.17
     base_thickness: float = 0.01
+    joint_errors: tuple[tuple[float, ...], ...] | None = None
+    """Geometric errors of the *built* platform, per leg (dl, dPx, dPy, dPz, dBx, dBy, dBz) [m]
+    as in seed 000 Table 5. The MuJoCo model is built with them; :meth:`geometry` (what the
+    platform's controller believes) does not know them. None: a perfect platform."""
 
     def __post_init__(self) -> None:
+        if self.joint_errors is not None:
+            err = np.asarray(self.joint_errors, dtype=float)
+            if err.shape != (N_LEGS, 7) or not np.all(np.isfinite(err)):
+                raise ConfigError(f"joint_errors must be {N_LEGS} rows of 7 finite numbers "
+                                  f"(dl, dP xyz, dB xyz) [m], got shape {err.shape}")
+            if np.max(np.abs(err)) > MAX_JOINT_ERROR:
+                raise ConfigError(f"joint_errors up to {np.max(np.abs(err)) * 1e3:.3g} mm; valid: "
+                                  f"|error| <= {MAX_JOINT_ERROR * 1e3:g} mm")
+            object.__setattr__(self, "joint_errors", tuple(tuple(float(v) for v in row) for row in err))
         positive = ("l_min", "stroke", "platform_mass", "cyl_mass", "rod_mass", "leg_kp",
                     "leg_force_limit", "platform_radius", "platform_thickness",
                     "base_radius", "base_thickness")
@@ -140,6 +157,29 @@ class StewartConfig:
                               self.lower_hinge_limit_deg, self.upper_hinge_limit_deg, self.home_z)
 
 
+def built_geometry(cfg: StewartConfig) -> tuple[StewartGeometry, np.ndarray]:
+    """The platform as built: geometry with the joint errors, and the leg-length errors dl [m]
+    (leg length = l_min + dl_i + stroke_i). Equals the nominal geometry without errors."""
+    nominal = cfg.geometry()
+    if cfg.joint_errors is None:
+        return nominal, np.zeros(N_LEGS)
+    err = np.asarray(cfg.joint_errors)
+    built = StewartGeometry(nominal.P + err[:, 1:4], nominal.B + err[:, 4:7], nominal.l_min,
+                            nominal.stroke, nominal.lower_hinge_limit_deg,
+                            nominal.upper_hinge_limit_deg, nominal.home_pos)
+    return built, err[:, 0].copy()
+
+
+def initial_pose(cfg: StewartConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Where the built platform stands when its legs hold the nominal home strokes (pos, rot in
+    the base frame): the home pose exactly without joint errors."""
+    if cfg.joint_errors is None:
+        return cfg.home_pos, np.eye(3)
+    built, dl = built_geometry(cfg)
+    pos, rot, _ = forward_kinematics(built, home_strokes(cfg) + dl, cfg.home_pos, np.eye(3))
+    return pos, rot
+
+
 def stewart_geometry(cfg: StewartConfig | None = None) -> StewartGeometry:
     """The :class:`StewartGeometry` of a config (default config when None)."""
     return (cfg or StewartConfig()).geometry()
@@ -185,13 +225,16 @@ def _leg_frame(direction: np.ndarray) -> np.ndarray:
 
 def build_stewart_spec(cfg: StewartConfig = StewartConfig(),
                        physics: PhysicsConfig | None = None) -> mujoco.MjSpec:
-    """MjSpec of the platform at its home pose; qpos0 closes every loop exactly."""
+    """MjSpec of the platform as built (with `cfg.joint_errors`) at the pose the nominal home
+    strokes give it (home exactly without errors); qpos0 closes every loop exactly."""
     physics = physics or PhysicsConfig()
     spec = mujoco.MjSpec()
     spec.modelname = "stewart"
     spec.compiler.degree = False  # MjSpec defaults to degrees; every angle below is in radians
-    p, b = load_joint_table(cfg.swap_legs12)
-    s_home = home_strokes(cfg)
+    built, dl = built_geometry(cfg)
+    p, b = built.P, built.B
+    s_home = home_strokes(cfg)  # the controller's home command; the built platform stands at:
+    pos0, rot0 = initial_pose(cfg)
     no_contact = {"contype": 0, "conaffinity": 0}
     cyl_len, rod_len = 0.16, 0.15  # visual: rod stays inside the cylinder over the full stroke
 
@@ -202,8 +245,8 @@ def build_stewart_spec(cfg: StewartConfig = StewartConfig(),
 
     lim = cfg.lower_hinge_limit_deg * np.pi / 180
     for i in range(1, N_LEGS + 1):
-        length = cfg.l_min + s_home[i - 1]
-        direction = cfg.home_pos + p[i - 1] - b[i - 1]
+        length = cfg.l_min + dl[i - 1] + s_home[i - 1]
+        direction = pos0 + rot0 @ p[i - 1] - b[i - 1]
         cyl = base.add_body(name=f"cyl{i}", pos=b[i - 1], quat=_leg_frame(direction))
         for suffix, axis in (("a", [1.0, 0, 0]), ("b", [0, 1.0, 0])):
             # Cardan joint: the neutral axis is the home leg direction, limits about it.
@@ -223,7 +266,9 @@ def build_stewart_spec(cfg: StewartConfig = StewartConfig(),
                      rgba=ROD_RGBA, **no_contact)
         rod.add_site(name=f"rod_end{i}", size=[0.006, 0, 0], rgba=ROD_RGBA)
 
-    plat = spec.worldbody.add_body(name="platform", pos=cfg.home_pos)
+    quat0 = np.zeros(4)
+    mujoco.mju_mat2Quat(quat0, np.ascontiguousarray(rot0).ravel())
+    plat = spec.worldbody.add_body(name="platform", pos=pos0, quat=quat0)
     plat.add_freejoint(name="platform_free")
     plat.add_geom(name="platform_disc", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                   size=[cfg.platform_radius, cfg.platform_thickness / 2, 0],
