@@ -35,6 +35,10 @@ class PhysicsConfig:
     precision_dampratio: float = 1.0
     precision_friction: float = 0.2
     """Sliding friction between journal and bore (steel on brass, dry-ish)."""
+    grip_timesteps: float = 5.0
+    """solref time constant of the gripper pads in timesteps. Friction damps slip at rate
+    2/timeconst, so a held part slides ~ (hand speed) * timeconst / 2 on every move: shorter is
+    better, but at 2 steps a light part pressed off-axis onto the plate spins up and blows up."""
     sleep: bool = True
     """MuJoCo island sleeping: parts at rest (conductors in the tray or seated) stop being
     integrated until something awake touches them. Actuated trees (arm, Stewart) never sleep.
@@ -50,9 +54,15 @@ class PhysicsConfig:
         if self.precision_timeconst is not None and self.precision_timeconst < 2 * self.timestep:
             raise ConfigError(f"precision_timeconst {self.precision_timeconst} s below 2*timestep "
                               f"({2 * self.timestep} s): MuJoCo would clamp it")
+        if not 2.0 <= self.grip_timesteps <= 200.0:
+            raise ConfigError(f"grip_timesteps {self.grip_timesteps}: valid 2..200")
         d0, dw, width = self.precision_solimp[:3]
         if not (0 < d0 <= dw < 1 and width > 0):
             raise ConfigError(f"precision_solimp {self.precision_solimp} needs 0<d0<=dwidth<1, width>0")
+
+    @property
+    def grip_solref(self) -> tuple[float, float]:
+        return (self.grip_timesteps * self.timestep, 1.0)
 
     @property
     def precision_solref(self) -> tuple[float, float]:

@@ -116,9 +116,8 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
     spec.attach(build_arm_spec(), prefix=names.ARM, frame=world.add_frame(pos=[0, 0, 0]))
     for pad in PAD_GEOMS:
         # Friction is a damper on slip velocity with rate 2/timeconst: a held part slides along the
-        # pads by ~(hand speed)/rate on every move, so the pads take the stiffest stable time
-        # constant (0.6 mm per 0.2 m move at 0.01 s, 6 um at 2 dt; assets/arm/README.md).
-        spec.geom(names.ARM + pad).solref = list(cfg.physics.precision_solref)
+        # pads by ~(hand speed)/rate on every move (0.6 mm per 0.2 m move at 0.01 s; README).
+        spec.geom(names.ARM + pad).solref = list(cfg.physics.grip_solref)
     if cfg.calibration_board is not None:
         add_board(spec, cfg.calibration_board)
     spec.attach(build_stewart_spec(cfg.stewart, cfg.physics), prefix=names.STEWART,

@@ -61,10 +61,18 @@ def test_neighbours_undisturbed(picked):
     assert moved < 1e-5
 
 
-def test_part_does_not_slide_in_the_pads_in_transit(picked):
+def test_part_does_not_slide_mm_in_the_pads_in_transit(picked):
     _, _, carried = picked
-    # 0.5 m at 0.5 m/s: MuJoCo's friction damper lets it slide ~ speed / (2 / timeconst).
-    assert np.linalg.norm(carried) < 5e-5
+    # 0.5 m at 0.5 m/s: MuJoCo's friction damper lets it slide ~ speed / (2 / timeconst);
+    # with the old 0.01 s pad time constant this was ~1.5 mm.
+    assert np.linalg.norm(carried) < 1e-4
+
+
+@pytest.mark.xfail(strict=True, reason="pad slip is ~70 um per 0.5 m transit at the stable pad "
+                   "time constant (5 dt); the task needs < 20 um between inspection and insertion")
+def test_part_slides_less_than_the_task_needs(picked):
+    _, _, carried = picked
+    assert np.linalg.norm(carried) < 2e-5
 
 
 def test_blow_up_is_named():

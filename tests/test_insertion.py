@@ -1,0 +1,49 @@
+"""Step 6 alone: a journal held above hole 14 (put in the hand kinematically as the initial
+condition) is inserted under direct force-position control and the outcome is classified
+from the simulator's truth."""
+
+import numpy as np
+import pytest
+
+from controllers.arm_controller import ControlLaw
+from controllers.stewart_servo import StewartServo
+from sim import names
+from sim.poses import GRASP_HEIGHT, put_in_hand, solve_tcp_pose
+from sim.scene import SceneConfig, build_scene
+from sim.stewart import stewart_geometry
+from tasks.arm_checks import controller_config
+from tasks.cell_runtime import CellRuntime
+from tasks.episode_config import Outcome
+from tasks.insertion import InsertionResult, insert
+
+HOLE = 14
+
+
+def _insert_with_offset(offset: float) -> InsertionResult:
+    scene = build_scene(SceneConfig(n_conductors=1))
+    m, d = scene.model, scene.data
+    seat = d.site_xpos[scene.hole_sites[HOLE]] + [offset, 0.0, GRASP_HEIGHT]
+    d.qpos[scene.arm_qpos_adr] = solve_tcp_pose(scene, seat + [0.0, 0.0, 0.003])
+    put_in_hand(scene, 0, GRASP_HEIGHT)
+    servo = StewartServo.from_model(m, stewart_geometry(scene.config.stewart), names.STEWART)
+    rt = CellRuntime.create(scene, servo, controller_config(noise=True), seed=0)
+    rt.gripper.grasp(20.0)
+    rt.run(0.3)
+    rt.arm.tare()
+    rot = d.site(names.ARM + "tcp").xmat.reshape(3, 3).copy()
+    return insert(rt, seat, rot, np.array([0.0, 0.0, -1.0]), ControlLaw.FORCE_POSITION, 0, HOLE)
+
+
+def test_aligned_journal_seats():
+    result = _insert_with_offset(0.0)
+    assert result.outcome is Outcome.SUCCESS, result.reason
+    assert result.depth_shortfall_mm < 0.02 and result.peak_force_n < 20.0
+    assert result.insertion_time_s < 2.0
+
+
+@pytest.mark.parametrize("offset", [5e-4])
+def test_journal_beyond_the_chamfer_does_not_enter(offset):
+    result = _insert_with_offset(offset)
+    assert result.outcome is Outcome.ALIGN_FAIL, result.reason
+    assert abs(result.lateral_misalignment_mm - offset * 1e3) < 0.05
+    assert result.depth_shortfall_mm > 1.4  # the whole journal stayed out
