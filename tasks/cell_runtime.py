@@ -20,6 +20,7 @@ from sim import names
 from sim.arm import FINGER_JOINT_NAMES, GRIP_ACTUATOR, GRIP_FORCE_MAX
 from sim.errors import UnstableSimulation
 from sim.scene import Scene
+from sim.stewart import MAX_JOINT_ERROR
 
 MAX_SPEED = 100.0
 """Any joint or part faster than this [m/s or rad/s] means the integration blew up."""
@@ -80,8 +81,13 @@ class CellRuntime:
     _warnings: int = 0
 
     @classmethod
-    def create(cls, scene: Scene, stewart: StewartServo, arm_config: ArmControllerConfig,
-               seed: int) -> CellRuntime:
+    def create(cls, scene: Scene, arm_config: ArmControllerConfig, seed: int,
+               stewart: StewartServo | None = None) -> CellRuntime:
+        """Controllers for `scene`; `stewart` defaults to the platform's nominal model (which
+        differs from a platform built with hidden joint errors by those errors)."""
+        if stewart is None:
+            stewart = StewartServo.from_model(scene.model, scene.config.stewart.geometry(),
+                                              names.STEWART, match_tol=MAX_JOINT_ERROR)
         arm = ArmController(scene.model, names.ARM, arm_config, seed)
         arm.hold_joints(scene.data.qpos[scene.arm_qpos_adr].copy())
         return cls(scene, arm, GripperServo.from_model(scene.model), stewart)

@@ -4,12 +4,10 @@ sliding in the pads; an unstable integration is caught and named."""
 import numpy as np
 import pytest
 
-from controllers.stewart_servo import StewartServo
 from sim import names
 from sim.errors import UnstableSimulation
 from sim.poses import GRASP_HEIGHT
 from sim.scene import SceneConfig, build_scene
-from sim.stewart import stewart_geometry
 from tasks.arm_checks import controller_config
 from tasks.cell_runtime import CellRuntime
 from tasks.motions import move_tcp, tcp_pose
@@ -20,9 +18,7 @@ GRASP_ROT = np.array([[-1.0, 0, 0], [0, 1.0, 0], [0, 0, -1.0]])  # TCP z down, f
 
 def _runtime(n_conductors: int) -> CellRuntime:
     scene = build_scene(SceneConfig(n_conductors=n_conductors))
-    servo = StewartServo.from_model(scene.model, stewart_geometry(scene.config.stewart),
-                                    names.STEWART)
-    rt = CellRuntime.create(scene, servo, controller_config(noise=True), seed=0)
+    rt = CellRuntime.create(scene, controller_config(noise=True), seed=0)
     rt.arm.update(scene.model, scene.data)
     return rt
 

@@ -6,11 +6,9 @@ import numpy as np
 import pytest
 
 from controllers.arm_controller import ControlLaw
-from controllers.stewart_servo import StewartServo
 from sim import names
 from sim.poses import GRASP_HEIGHT, put_in_hand, solve_tcp_pose
 from sim.scene import SceneConfig, build_scene
-from sim.stewart import stewart_geometry
 from tasks.arm_checks import controller_config
 from tasks.cell_runtime import CellRuntime
 from tasks.episode_config import Outcome
@@ -21,12 +19,11 @@ HOLE = 14
 
 def _insert_with_offset(offset: float) -> InsertionResult:
     scene = build_scene(SceneConfig(n_conductors=1))
-    m, d = scene.model, scene.data
+    d = scene.data
     seat = d.site_xpos[scene.hole_sites[HOLE]] + [offset, 0.0, GRASP_HEIGHT]
     d.qpos[scene.arm_qpos_adr] = solve_tcp_pose(scene, seat + [0.0, 0.0, 0.003])
     put_in_hand(scene, 0, GRASP_HEIGHT)
-    servo = StewartServo.from_model(m, stewart_geometry(scene.config.stewart), names.STEWART)
-    rt = CellRuntime.create(scene, servo, controller_config(noise=True), seed=0)
+    rt = CellRuntime.create(scene, controller_config(noise=True), seed=0)
     rt.gripper.grasp(20.0)
     rt.run(0.3)
     rt.arm.tare()
