@@ -77,7 +77,12 @@ class CellRuntime:
     stewart: StewartServo
     """Commands legs through the platform's *model* (nominal or calibrated geometry)."""
     time: float = 0.0
+    phase: str = "start"
+    """What the task is doing (annotations in recordings)."""
     observers: list[Observer] = field(default_factory=list)
+    substep_probe: Callable[[], None] | None = None
+    """Called after every physics substep when set (e.g. to average a contact force over the
+    control period the way a 1 kHz sensor integrates it); None keeps the fast path."""
     _warnings: int = 0
 
     @classmethod
@@ -101,7 +106,12 @@ class CellRuntime:
         m, d = self.scene.model, self.scene.data
         self.arm.update(m, d)
         self.gripper.update(d)
-        mujoco.mj_step(m, d, nstep=self.arm.substeps)
+        if self.substep_probe is None:
+            mujoco.mj_step(m, d, nstep=self.arm.substeps)
+        else:
+            for _ in range(self.arm.substeps):
+                mujoco.mj_step(m, d)
+                self.substep_probe()
         self.time += self.arm.dt
         self._check_health()
         for observer in self.observers:
@@ -110,6 +120,10 @@ class CellRuntime:
     def run(self, seconds: float) -> None:
         for _ in range(round(seconds / self.dt)):
             self.step()
+
+    def reset_health(self) -> None:
+        """Forget counted warnings (after the state was restored from a snapshot)."""
+        self._warnings = 0
 
     def _check_health(self) -> None:
         d = self.scene.data

@@ -55,7 +55,9 @@ class InsertionResult:
     outcome: Outcome
     reason: str
     peak_force_n: float
-    """True peak contact force between the part and the baseplate [N]."""
+    """Peak contact force between the part and the baseplate [N], each sample the mean over one
+    1 ms control period (what a 1 kHz force sensor reports; the solver's single-substep spike
+    when the shoulder contact activates is ~4x that and lasts 0.1 ms)."""
     lateral_misalignment_mm: float
     """Tip centre to hole axis at first contact (true) [mm]; nan if never touched."""
     insertion_time_s: float
@@ -80,10 +82,20 @@ class _Truth:
                       if m.body(m.geom_bodyid[g]).name.startswith(names.PLATE)}
         self.tip = m.site(f"{names.conductor(conductor)}tip").id
         self.shoulder = m.site(f"{names.conductor(conductor)}shoulder").id
+        self._sum, self._n = 0.0, 0
 
     def force(self) -> float:
         d = self.rt.scene.data
         return float(np.linalg.norm(contact_force_on(self.rt.scene.model, d, self.part, self.plate)))
+
+    def accumulate(self) -> None:
+        self._sum, self._n = self._sum + self.force(), self._n + 1
+
+    def period_mean(self) -> float:
+        """Mean force over the substeps since the last call."""
+        mean = self._sum / max(self._n, 1)
+        self._sum, self._n = 0.0, 0
+        return mean
 
     def _in_hole_frame(self, site: int) -> np.ndarray:
         d = self.rt.scene.data
@@ -112,6 +124,15 @@ def insert(rt: CellRuntime, seat_tcp: np.ndarray, rot: np.ndarray, axis: np.ndar
     start, _ = rt.arm.nominal.tcp_pose()
     start = start.copy()
     goal = np.asarray(seat_tcp, float) + config.overtravel * axis
+    rt.substep_probe = truth.accumulate
+    try:
+        return _push(rt, truth, start, goal, rot, axis, law, config)
+    finally:
+        rt.substep_probe = None
+
+
+def _push(rt: CellRuntime, truth: _Truth, start: np.ndarray, goal: np.ndarray, rot: np.ndarray,
+          axis: np.ndarray, law: ControlLaw, config: InsertionConfig) -> InsertionResult:
     t0, peak, lateral, t_contact = rt.time, 0.0, float("nan"), None
     held: CartesianTarget | None = None
     window: deque[float] = deque(maxlen=round(config.stall_s / rt.dt) + 1)
@@ -128,7 +149,7 @@ def insert(rt: CellRuntime, seat_tcp: np.ndarray, rot: np.ndarray, axis: np.ndar
         if held is not None:
             rt.arm.track(held, law, ForceTarget(axis, config.force_n))
         rt.step()
-        force = truth.force()
+        force = truth.period_mean()
         peak = max(peak, force)
         if t_contact is None and force > 0.05:
             t_contact, lateral = rt.time, truth.lateral()

@@ -26,6 +26,9 @@ def run(*args: str) -> subprocess.CompletedProcess:
     (["vision-check", "--width", "300"], "invalid choice: 300"),
     (["vision-check", "--poses", "0"], "platform_poses >= 1"),
     (["bench", "--repeats", "0"], "repeats in 1..20"),
+    (["run", "--holes", "0"], "a count in 1..36"),
+    (["run", "--episodes", "0"], "--episodes 0: must be >= 1"),
+    (["run", "--workers", "0"], "--workers 0: must be >= 1"),
 ])
 def test_bad_input_is_one_line_exit_2(args, needle):
     r = run(*args)

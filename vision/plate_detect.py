@@ -66,7 +66,9 @@ def find_dark_discs(image: np.ndarray, window: tuple[int, int, int, int], diamet
         centre, total = soft_centroid(weight, cents[i], 0.9 * diameter_px)
         # The ring around a hole must be plate: no edge, shadow or speckle patch.
         r, (cx, cy) = int(1.4 * diameter_px), np.round(centre).astype(int)
-        ys, xs = slice(max(0, cy - r), cy + r + 1), slice(max(0, cx - r), cx + r + 1)
+        # Clipped to the window: a hole near its border has a partial ring.
+        ys = slice(max(0, cy - r), min(dark.shape[0], cy + r + 1))
+        xs = slice(max(0, cx - r), min(dark.shape[1], cx + r + 1))
         yy, xx = np.mgrid[ys, xs]
         r2 = (xx - centre[0]) ** 2 + (yy - centre[1]) ** 2
         ring = (r2 > (0.8 * diameter_px) ** 2) & (r2 < (1.3 * diameter_px) ** 2)

@@ -1,0 +1,101 @@
+"""``serpar run``: assembly episodes, headless (issue 5)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import sys
+
+from serpar.output import progress, table
+
+
+def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("run", help="assembly episodes: the six steps for every hole, outcomes and "
+                                   "success rate")
+    p.add_argument("--config", help="episode config YAML (keys of tasks.episode_config.EpisodeConfig)")
+    p.add_argument("--episodes", type=int, default=1, help="number of episodes, consecutive seeds (default 1)")
+    p.add_argument("--holes", type=int, help="holes to fill per episode, 1..36 (default: the config's, 36)")
+    p.add_argument("--seed", type=int, help="seed of the first episode (default: the config's, 0)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="episodes in parallel local processes (same results as serial; default 1)")
+    p.add_argument("--json", action="store_true",
+                   help="JSON lines on stdout: one per hole, one per episode, then the summary")
+    p.set_defaults(func=cmd_run)
+    return p
+
+
+def episode_config(args: argparse.Namespace):
+    from sim.config_io import load_yaml_config
+    from sim.errors import ConfigError
+    from tasks.episode_config import EpisodeConfig
+
+    cfg = load_yaml_config(EpisodeConfig, args.config) if args.config else EpisodeConfig()
+    if args.holes is not None:
+        cfg = dataclasses.replace(cfg, holes=args.holes)
+    if args.seed is not None:
+        cfg = dataclasses.replace(cfg, seed=args.seed)
+    if cfg.stewart_calibration is not None:  # a bad file fails now, not in every episode
+        from tasks.stewart_params import load_stewart_parameters
+
+        load_stewart_parameters(cfg.stewart_calibration)
+    if args.episodes < 1:
+        raise ConfigError(f"--episodes {args.episodes}: must be >= 1")
+    if args.workers < 1:
+        raise ConfigError(f"--workers {args.workers}: must be >= 1")
+    return cfg
+
+
+def _line(record: dict) -> str:
+    return json.dumps(record, default=float)
+
+
+def print_summary(summary) -> None:
+    lo, hi = summary.wilson95
+    print(f"{summary.episodes} episode(s), {summary.holes} holes: success {summary.successes}/{summary.holes}"
+          f" = {100 * summary.success_rate:.1f} % (95 % Wilson {100 * lo:.1f}-{100 * hi:.1f} %)")
+    print(table(["outcome", "holes"], [[k, v] for k, v in summary.counts.items() if v]))
+    ct, pf = summary.cycle_time_s, summary.peak_force_n
+    print(f"cycle time (simulated) mean {ct['mean']:.2f} s, max {ct['max']:.2f} s; "
+          f"peak contact force mean {pf['mean']:.2f} N, max {pf['max']:.2f} N")
+    if summary.sim_faults:
+        print(f"{summary.sim_faults} hole(s) ended by a simulation breakdown (see the records' reason)")
+    if summary.errors:
+        print(f"{summary.errors} episode(s) failed to run (error records)")
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from tasks.camera_cache import calibrated_pairs
+    from tasks.run_episodes import episode_configs, run_many, summarise
+
+    cfg = episode_config(args)
+    configs = episode_configs(cfg, args.episodes)
+    n_holes = cfg.holes if isinstance(cfg.holes, int) else len(cfg.holes)
+    calibrated_pairs(cfg.camera_width, log=lambda m: print(m, file=sys.stderr))  # once, before workers
+    bar = progress(n_holes * len(configs), "holes", enabled=sys.stderr.isatty())
+
+    def on_hole(record: dict) -> None:
+        bar.update(1)
+        bar.set_postfix_str(f"hole {record['hole']}: {record['outcome']}")
+        if args.json:
+            print(_line(record), flush=True)
+
+    def on_records(records: list[dict]) -> None:
+        for r in records:
+            if args.workers > 1 and r["kind"] == "hole":
+                on_hole(r)
+            elif r["kind"] != "hole" and args.json:
+                print(_line(r), flush=True)
+
+    records = run_many(configs, args.workers, on_records, on_hole if args.workers == 1 else None)
+    bar.close()
+    summary = summarise(records)
+    if args.json:
+        print(_line(summary.as_dict()))
+    else:
+        print_summary(summary)
+    interrupted = any(r["kind"] == "interrupted" for r in records)
+    if interrupted:
+        print("interrupted: the results above cover the finished episodes", file=sys.stderr)
+    return 130 if interrupted else (0 if not math.isnan(summary.success_rate) else 1)

@@ -1,0 +1,159 @@
+"""One assembly episode: the six steps of seed 000 §5.2 for each hole to fill.
+
+1 locate conductors and 2 find empty holes (top cameras, one shot per cycle), 3 grasp and
+carry, 4 in-hand inspection (inspect cameras), 5 the Stewart platform brings the hole under
+the held journal (or, serial robot alone, the arm goes to the hole), 6 compliant insertion.
+Each hole ends as an :class:`HoleRecord` with one outcome; a simulation that breaks down ends
+its hole as a failure with the reason, and the episode goes on from the state before it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from controllers.arm_controller import ControlLaw
+from sim.errors import SimError, UnstableSimulation
+from sim.scene import Scene, SceneConfig, build_scene
+from sim.stewart import StewartConfig
+from tasks.arm_checks import controller_config
+from tasks.cell_runtime import CellRuntime
+from tasks.episode_config import EpisodeConfig, Outcome
+from tasks.episode_steps import CycleFailure, HoleCycle
+from tasks.stewart_correction import PlateCommander
+from tasks.stewart_params import load_stewart_parameters
+from vision.camera import StereoPair
+from vision.imaging import Camera, ImagingConfig
+
+SETTLE_S = 0.3
+
+
+@dataclass(frozen=True)
+class HoleRecord:
+    """How one hole cycle ended (JSON-ready)."""
+
+    episode_seed: int
+    cycle: int
+    hole: int | None
+    conductor: int | None
+    outcome: str
+    reason: str
+    peak_force_n: float
+    lateral_misalignment_mm: float
+    insertion_time_s: float
+    depth_shortfall_mm: float
+    clearance_um: float
+    """Drawn diametral clearance of the hole/journal pair (simulator's draw) [um]."""
+    cycle_time_s: float
+    """Simulated time of the whole cycle [s]."""
+    wall_s: float
+    sim_fault: bool = False
+    """The cycle ended because the integration broke down (see reason)."""
+    phase_s: dict[str, float] = dataclasses.field(default_factory=dict)
+    """Simulated seconds per phase (locate, grasp, inspect, align, insert, release)."""
+
+    def as_dict(self) -> dict[str, object]:
+        return {"kind": "hole", **dataclasses.asdict(self)}
+
+
+@dataclass(frozen=True)
+class EpisodeSummary:
+    seed: int
+    holes: int
+    successes: int
+    counts: dict[str, int]
+    sim_time_s: float
+    wall_s: float
+
+    def as_dict(self) -> dict[str, object]:
+        return {"kind": "episode", **dataclasses.asdict(self)}
+
+
+def scene_config(cfg: EpisodeConfig) -> SceneConfig:
+    """The cell of an episode: its seed's tolerance draw and the hidden Stewart errors."""
+    return SceneConfig(seed=cfg.seed, tolerance_distribution=cfg.tolerance_distribution,
+                       stewart=StewartConfig(joint_errors=cfg.hidden_errors.draw(cfg.seed)))
+
+
+def _believed_errors(cfg: EpisodeConfig) -> np.ndarray | None:
+    return None if cfg.stewart_calibration is None else load_stewart_parameters(cfg.stewart_calibration)
+
+
+def build_runtime(cfg: EpisodeConfig) -> tuple[CellRuntime, PlateCommander]:
+    scene: Scene = build_scene(scene_config(cfg))
+    rt = CellRuntime.create(scene, controller_config(cfg.sensor_noise), seed=cfg.seed)
+    plate = PlateCommander.create(scene.model, scene.config.stewart, _believed_errors(cfg))
+    rt.observers.append(lambda r: plate.update(r.scene.data, r.time))
+    return rt, plate
+
+
+class _Snapshot:
+    """The physics state and command state at the start of a cycle, to go on from after a
+    breakdown (the broken cycle's part is then left out)."""
+
+    def __init__(self, rt: CellRuntime, plate: PlateCommander) -> None:
+        m, d = rt.scene.model, rt.scene.data
+        self.spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        self.state = np.empty(mujoco.mj_stateSize(m, self.spec))
+        mujoco.mj_getState(m, d, self.state, self.spec)
+        self.time, self.commanded = rt.time, plate.commanded.copy()
+        self.gripper = (rt.gripper.width_target, rt.gripper.squeeze)
+
+    def restore(self, rt: CellRuntime, plate: PlateCommander) -> None:
+        m, d = rt.scene.model, rt.scene.data
+        mujoco.mj_setState(m, d, self.state, self.spec)
+        mujoco.mj_forward(m, d)
+        for warning in d.warning:
+            warning.number = 0
+        rt.reset_health()
+        rt.time = self.time
+        plate.commanded, plate._ramp = self.commanded, None
+        rt.arm.hold_joints(d.qpos[rt.scene.arm_qpos_adr].copy())
+        rt.gripper.width_target, rt.gripper.squeeze = self.gripper
+
+
+def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
+                on_record: Callable[[HoleRecord], None] | None = None,
+                runtime: tuple[CellRuntime, PlateCommander] | None = None) -> EpisodeSummary:
+    """Fill the holes of `cfg`; `on_record` receives each hole's record as it ends."""
+    t_wall = time.perf_counter()
+    rt, plate = runtime or build_runtime(cfg)
+    imaging = ImagingConfig(width=cfg.camera_width) if cfg.sensor_noise else ImagingConfig.ideal(cfg.camera_width)
+    camera = Camera(rt.scene.model, imaging, seed=cfg.seed)
+    law = ControlLaw.FORCE_POSITION if cfg.controller == "force_position" else ControlLaw.IMPEDANCE
+    cycle = HoleCycle(rt, plate, camera, pairs, cfg, law)
+    counts = {o.value: 0 for o in Outcome}
+    n = cfg.holes if isinstance(cfg.holes, int) else len(cfg.holes)
+    try:
+        rt.run(SETTLE_S)
+        cycle.register_platform()
+        for k in range(n):
+            wanted = None if isinstance(cfg.holes, int) else cfg.holes[k]
+            snap, t0, w0 = _Snapshot(rt, plate), rt.time, time.perf_counter()
+            broken = False
+            try:
+                result = cycle.run(wanted)
+            except CycleFailure as failure:
+                result = failure.as_result()
+            except (UnstableSimulation, SimError) as exc:
+                result, broken = cycle.fault_result(exc), True
+            except (ValueError, IndexError, ArithmeticError) as exc:  # a defect: record it, go on
+                result, broken = cycle.fault_result(RuntimeError(f"{type(exc).__name__}: {exc}")), True
+            record = HoleRecord(cfg.seed, k, result.hole, result.conductor, result.outcome.value,
+                                result.reason, result.peak_force_n, result.lateral_misalignment_mm,
+                                result.insertion_time_s, result.depth_shortfall_mm, result.clearance_um,
+                                rt.time - t0, time.perf_counter() - w0, broken,
+                                cycle.phase_durations(rt.time))
+            if broken:
+                snap.restore(rt, plate)
+            counts[record.outcome] += 1
+            if on_record:
+                on_record(record)
+    finally:
+        camera.close()
+    return EpisodeSummary(cfg.seed, n, counts["success"], counts, rt.time, time.perf_counter() - t_wall)

@@ -1,0 +1,90 @@
+"""The arm's moves of one hole cycle (steps 3 and 4 and the way to step 6), as the cell knows
+them: every target comes from vision and the arm's measured joints, never from the simulator.
+
+The poses: parts are taken from the tray and presented to the in-hand cameras with the
+fingers closing along the world x axis (across the inspect cameras' line of sight), TCP z
+down; at the inspection point the TCP leans by INSPECT_ROLL about the viewing direction (the
+slanted-edge trick of :mod:`tasks.vision_inhand_scenes`). Free-space moves first rise to
+CLEAR_Z, above everything on the plate and the tray, then travel level.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controllers.rotations import so3_exp
+from sim.poses import GRASP_HEIGHT
+from sim.scene import Scene
+from tasks.cell_runtime import CellRuntime
+from tasks.motions import move_tcp, tcp_pose
+from vision.inhand import InHandMeasurement
+from vision.tray import ConductorSighting
+
+HAND_DOWN = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+"""TCP x along world y, fingers (TCP y) closing along world x, TCP z down."""
+INSPECT_ROLL = np.radians(5.0)
+CLEAR_Z = 0.345
+"""Travel height of the TCP [m]: the part's tip clears the plate, seated parts and the tray."""
+TRANSIT_SPEED = 0.8
+FINE_SPEED = 0.08
+"""Approach to the part and lift out of the pocket [m/s]."""
+ABOVE_PART = 0.012
+"""Pre-grasp height of the TCP above its grasp position [m]."""
+LIFT = 0.02
+GRASP_SQUEEZE = 20.0
+"""Squeeze per pad [N] (the Franka Hand's grasp force)."""
+OPEN_MARGIN = 1.5e-3
+"""Jaw opening beyond the body diameter before a grasp [m]."""
+HOVER = 0.004
+"""Shoulder height above the hole entry at the hover [m] (tip 2.5 mm above)."""
+
+
+def inspect_rotation(roll: float = INSPECT_ROLL) -> np.ndarray:
+    """HAND_DOWN leaned by `roll` about the world y axis (the inspect cameras' line of sight)."""
+    return so3_exp(np.array([0.0, -roll, 0.0])) @ HAND_DOWN
+
+
+def travel(rt: CellRuntime, goal: np.ndarray, rot: np.ndarray, clear_z: float = CLEAR_Z) -> None:
+    """Rise to clear_z, travel level to above the goal, then go down to it."""
+    pos, _ = tcp_pose(rt)
+    if pos[2] < clear_z - 1e-4:
+        move_tcp(rt, np.array([pos[0], pos[1], clear_z]), rot, speed=TRANSIT_SPEED, settle_s=0.0)
+    move_tcp(rt, np.array([goal[0], goal[1], max(clear_z, goal[2])]), rot, speed=TRANSIT_SPEED, settle_s=0.0)
+    move_tcp(rt, np.asarray(goal, float), rot, speed=TRANSIT_SPEED, settle_s=0.1)
+
+
+def pick(rt: CellRuntime, sighting: ConductorSighting, body_diameter: float) -> float:
+    """Take the sighted conductor out of its pocket; returns the jaw width after the squeeze
+    (about the body diameter when the part is in the hand, near 0 when it was missed).
+
+    `body_diameter` is the nominal one: the cell does not know the drawn diameter."""
+    grasp_tcp = sighting.shoulder + GRASP_HEIGHT * sighting.axis
+    rt.gripper.open_to(body_diameter + OPEN_MARGIN)
+    travel(rt, grasp_tcp + ABOVE_PART * sighting.axis, HAND_DOWN)
+    move_tcp(rt, grasp_tcp, HAND_DOWN, speed=FINE_SPEED)
+    rt.gripper.grasp(GRASP_SQUEEZE)
+    rt.run(0.25)
+    width = rt.gripper.width(rt.scene.data)
+    move_tcp(rt, grasp_tcp + LIFT * sighting.axis, HAND_DOWN, speed=FINE_SPEED, settle_s=0.0)
+    return width
+
+
+def inspection_tcp(scene: Scene, roll: float = INSPECT_ROLL) -> np.ndarray:
+    """TCP position that puts a nominal grasp's shoulder at the inspect pair's target."""
+    pair = next(p for p in scene.config.stereo_pairs if p.name == "inspect")
+    return np.array(pair.target) - GRASP_HEIGHT * inspect_rotation(roll)[:, 2]
+
+
+def seat_tcp(hole_entry: np.ndarray, hand_rot: np.ndarray, held: InHandMeasurement,
+             journal_length: float) -> np.ndarray:
+    """Where the TCP is, at `hand_rot`, when the held part's shoulder sits on `hole_entry`."""
+    shoulder_in_tcp = held.tip - journal_length * held.axis
+    return np.asarray(hole_entry, float) - hand_rot @ shoulder_in_tcp
+
+
+def release(rt: CellRuntime, body_diameter: float) -> None:
+    """Open the hand on the seated part and back off along the TCP z."""
+    rt.gripper.open_to(body_diameter + OPEN_MARGIN)
+    rt.run(0.15)
+    pos, rot = tcp_pose(rt)
+    move_tcp(rt, pos - 0.015 * rot[:, 2], rot, speed=FINE_SPEED * 2, settle_s=0.0)
