@@ -32,7 +32,7 @@ from tasks.insertion import InsertionConfig, insert
 from tasks.motions import tcp_pose
 from tasks.stewart_correction import PlateCommander, inverse
 from vision.camera import StereoPair
-from vision.errors import VisionError
+from vision.errors import ConductorNotInView, VisionError
 from vision.imaging import Camera
 from vision.inhand import inspect_in_hand
 from vision.layout import plate_layout, tray_pockets, tray_region
@@ -175,8 +175,10 @@ class HoleCycle:
         try:
             held = inspect_in_hand(self.inspect, frames[INSPECT[0]], frames[INSPECT[1]], pos, rot,
                                    NOMINAL.conductor)
+        except ConductorNotInView as exc:  # nothing between the fingers: lost on the way
+            raise self._fail(Outcome.DROPPED, str(exc)) from None
         except VisionError as exc:
-            raise self._fail(Outcome.DROPPED if "not" in str(exc) else Outcome.VISION_MISS, str(exc)) from None
+            raise self._fail(Outcome.VISION_MISS, str(exc)) from None
         lj = NOMINAL.conductor.journal_length
 
         self._enter("align")
