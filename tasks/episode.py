@@ -112,7 +112,7 @@ class _Snapshot:
             warning.number = 0
         rt.reset_health()
         rt.time = self.time
-        plate.commanded, plate._ramp = self.commanded, None
+        plate.reset_to(self.commanded)
         rt.arm.hold_joints(d.qpos[rt.scene.arm_qpos_adr].copy())
         rt.gripper.width_target, rt.gripper.squeeze = self.gripper
 

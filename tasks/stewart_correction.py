@@ -139,6 +139,10 @@ class PlateCommander:
         if tau >= 1.0:
             self._ramp = None
 
+    def reset_to(self, commanded: np.ndarray) -> None:
+        """Forget any ramp and take `commanded` as the pose in force (after a state restore)."""
+        self.commanded, self._ramp = commanded.copy(), None
+
     @property
     def moving(self) -> bool:
         return self._ramp is not None
