@@ -111,7 +111,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="serpar", description=__doc__.split("\n")[0] if __doc__ else None)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser,
-                                metavar="{info,render,validate,control-check,workspace,vision-check,bench,run}")
+                                metavar="{info,render,validate,control-check,workspace,vision-check,bench,run,ablate}")
 
     def scene_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--seed", type=int, help="seed of the tolerance draws (integer; default 0)")
@@ -143,10 +143,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--physics", help="physics config YAML (keys of sim.physics.PhysicsConfig)")
     p.set_defaults(func=cmd_validate)
 
-    from serpar import cmd_bench, cmd_control_check, cmd_run, cmd_vision_check, cmd_workspace
+    from serpar import cmd_ablate, cmd_bench, cmd_control_check, cmd_run, cmd_vision_check, cmd_workspace
 
     cmd_control_check.register(sub)
     cmd_run.register(sub)
+    cmd_ablate.register(sub)
     cmd_workspace.register(sub)
     cmd_vision_check.register(sub)
     cmd_bench.register(sub)

@@ -14,6 +14,9 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                      "and in contact, with its overhead over the floor")
     p.add_argument("--seconds", type=float, default=0.2, help="simulated seconds per timing (default 0.2)")
     p.add_argument("--repeats", type=int, default=3, help="timings per figure, best kept (default 3)")
+    p.add_argument("--episode", action="store_true",
+                   help="also time the assembly task: one hole cycle, the 36-hole episode (estimated "
+                        "from it) and 2 workers vs 1 (adds ~4 min)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_bench)
     return p
@@ -23,13 +26,17 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from tasks.bench import BenchConfig, run_bench
 
     cfg = BenchConfig(sim_seconds=args.seconds, repeats=args.repeats)
-    bar = progress(5, "bench", enabled=sys.stderr.isatty())
+    bar = progress(5 + 3 * args.episode, "bench", enabled=sys.stderr.isatty())
 
     def tick(name: str) -> None:
         bar.set_postfix_str(name)
         bar.update(1)
 
     report = run_bench(cfg, tick)
+    if args.episode:
+        from tasks.bench_episode import episode_bench
+
+        report["episode"] = episode_bench(tick=tick)
     bar.close()
     if args.json:
         print_json(report)
@@ -46,4 +53,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
         rows.append(["  bare mj_step from the same state", f"{r['bare']['steps_per_s']:,.0f}",
                      f"{r['bare']['realtime_factor']:.2f}", ""])
     print(table(["", "steps/s", "x real time", "loop / bare"], rows))
+    if args.episode:
+        e = report["episode"]
+        c, w = e["hole_cycle"], e["two_episodes_of_one_hole"]
+        print(table(["assembly task", "wall s", "simulated s", "x real time"], [
+            ["one hole cycle (mean)", f"{c['wall_s']:.1f}", f"{c['sim_s']:.2f}", f"{c['realtime_factor']:.2f}"],
+            ["episode set-up (scene, settle, registration)", f"{e['episode_setup_wall_s']:.1f}", "", ""],
+            ["36-hole episode, estimated", f"{e['episode_36_holes_estimated_wall_s']:.0f}", "", ""],
+            ["2 one-hole episodes, 1 worker", f"{w['workers_1_s']:.1f}", "", ""],
+            ["2 one-hole episodes, 2 workers", f"{w['workers_2_s']:.1f}", "", f"speed-up {w['speedup']:.2f}x"]]))
     return 0

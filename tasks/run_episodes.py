@@ -26,36 +26,44 @@ def episode_configs(base: EpisodeConfig, episodes: int, first_seed: int | None =
     return [dataclasses.replace(base, seed=start + k) for k in range(episodes)]
 
 
-def run_one(cfg: EpisodeConfig, on_hole: Callable[[Record], None] | None = None) -> list[Record]:
+def run_one(cfg: EpisodeConfig, on_hole: Callable[[Record], None] | None = None,
+            label: str | None = None) -> list[Record]:
     """One episode's hole records and its summary record, as plain dicts (picklable);
-    `on_hole` (in-process runs only) sees each hole record as it ends."""
+    `on_hole` (in-process runs only) sees each hole record as it ends; `label` (e.g. the
+    ablation arm) is written into every record as "config"."""
+    tag = {} if label is None else {"config": label}
     from tasks.camera_cache import calibrated_pairs
     from tasks.episode import run_episode
 
     records: list[Record] = []
 
     def keep(record) -> None:
-        records.append(record.as_dict())
+        records.append({**record.as_dict(), **tag})
         if on_hole:
             on_hole(records[-1])
 
     try:
         summary = run_episode(cfg, calibrated_pairs(cfg.camera_width), on_record=keep)
-        records.append(summary.as_dict())
+        records.append({**summary.as_dict(), **tag})
     except Exception as exc:  # noqa: BLE001 - one bad episode must not end the run
-        records.append({"kind": "error", "episode_seed": cfg.seed, "error": f"{type(exc).__name__}: {exc}"})
+        records.append({"kind": "error", "episode_seed": cfg.seed, "error": f"{type(exc).__name__}: {exc}", **tag})
     return records
 
 
 def run_many(configs: Sequence[EpisodeConfig], workers: int = 1,
              on_records: Callable[[list[Record]], None] | None = None,
-             on_hole: Callable[[Record], None] | None = None) -> list[Record]:
+             on_hole: Callable[[Record], None] | None = None,
+             labels: Sequence[str | None] | None = None) -> list[Record]:
     """Run every config; `on_records` gets each episode's records as it finishes, `on_hole`
-    each hole record as it ends (in-process runs; workers report per episode). On Ctrl-C the
-    records of finished episodes are returned and the workers are stopped."""
+    each hole record as it ends (in-process runs; workers report per episode); `labels[k]`
+    tags config k's records. On Ctrl-C the records of finished episodes are returned and the
+    workers are stopped."""
     out: list[Record] = []
+    tags = list(labels) if labels is not None else [None] * len(configs)
+    if len(tags) != len(configs):
+        raise ValueError(f"{len(tags)} labels for {len(configs)} configs")
     try:
-        for records in _results(configs, workers, on_hole):
+        for records in _results(configs, workers, on_hole, tags):
             out += records
             if on_records:
                 on_records(records)
@@ -64,15 +72,15 @@ def run_many(configs: Sequence[EpisodeConfig], workers: int = 1,
     return out
 
 
-def _results(configs: Sequence[EpisodeConfig], workers: int,
-             on_hole: Callable[[Record], None] | None) -> Iterator[list[Record]]:
+def _results(configs: Sequence[EpisodeConfig], workers: int, on_hole: Callable[[Record], None] | None,
+             labels: Sequence[str | None]) -> Iterator[list[Record]]:
     if workers <= 1:
-        for cfg in configs:
-            yield run_one(cfg, on_hole)
+        for cfg, label in zip(configs, labels):
+            yield run_one(cfg, on_hole, label)
         return
     pool = ProcessPoolExecutor(max_workers=workers)
     try:
-        pending: set[Future] = {pool.submit(run_one, cfg) for cfg in configs}
+        pending: set[Future] = {pool.submit(run_one, cfg, None, label) for cfg, label in zip(configs, labels)}
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:

@@ -115,13 +115,13 @@ class PlateCommander:
         """Leg commands for a platform pose; LimitError names the leg and the limit."""
         return require_pose(self.geometry, pose[:3, 3], pose[:3, :3]) - self.dl
 
-    def move_to(self, data: mujoco.MjData, goal: np.ndarray, now: float) -> float:
-        """Start a min-jerk ramp from the commanded pose to `goal`; returns its duration [s].
-        The goal's limits are checked now, before anything moves."""
+    def move_to(self, data: mujoco.MjData, goal: np.ndarray, now: float, speed: float = RAMP_SPEED) -> float:
+        """Start a min-jerk ramp from the commanded pose to `goal` at peak `speed` [m/s];
+        returns its duration [s]. The goal's limits are checked now, before anything moves."""
         self.strokes(goal)
         start = self.commanded.copy()
         dist = float(np.linalg.norm(goal[:3, 3] - start[:3, 3]))
-        duration = max(MIN_RAMP_S, 1.875 * dist / RAMP_SPEED)
+        duration = max(MIN_RAMP_S, 1.875 * dist / speed)
         self._ramp = (start, goal, now, duration)
         self.update(data, now)
         return duration

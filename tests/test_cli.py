@@ -29,6 +29,8 @@ def run(*args: str) -> subprocess.CompletedProcess:
     (["run", "--holes", "0"], "a count in 1..36"),
     (["run", "--episodes", "0"], "--episodes 0: must be >= 1"),
     (["run", "--workers", "0"], "--workers 0: must be >= 1"),
+    (["ablate", "--holes", "37"], "a count in 1..36"),
+    (["ablate", "--episodes", "0"], "both must be >= 1"),
 ])
 def test_bad_input_is_one_line_exit_2(args, needle):
     r = run(*args)

@@ -50,7 +50,7 @@ def test_phases_are_timed(one_hole):
 def test_one_bad_episode_does_not_end_the_run(monkeypatch):
     import tasks.run_episodes as runner
 
-    def boom(cfg, on_hole=None):
+    def boom(cfg, on_hole=None, label=None):
         if cfg.seed == 1:
             return [{"kind": "error", "episode_seed": 1, "error": "RuntimeError: injected"}]
         return [{"kind": "hole", "outcome": "success", "sim_fault": False, "cycle_time_s": 7.0,

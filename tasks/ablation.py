@@ -1,0 +1,95 @@
+"""The paper's argument as one table (issue 5): success rate per configuration of the cell.
+
+Arms: the serial robot alone; with the Stewart step-5 correction through the platform's
+nominal (uncalibrated) model; through the model calibrated by a simulated motion-capture
+campaign (:mod:`tasks.stewart_campaign`); and the calibrated cell with impedance instead of
+direct force-position control. Every arm runs the same episode seeds, so the arms differ only
+in the configuration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import statistics
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from tasks.camera_cache import cache_dir
+from tasks.episode import scene_config
+from tasks.episode_config import EpisodeConfig
+from tasks.run_episodes import Record, RunSummary, episode_configs, run_many, summarise
+from tasks.stewart_campaign import N_POSES, MocapNoise, calibrate
+from tasks.stewart_params import save_stewart_parameters
+
+CALIBRATION_VERSION = 1
+"""Bump when the Stewart campaign or solver changes (invalidates cached parameter files)."""
+
+
+@dataclass(frozen=True)
+class AblationArm:
+    name: str
+    config: EpisodeConfig
+
+
+def stewart_calibration_file(cfg: EpisodeConfig, log: Callable[[str], None] | None = None) -> Path:
+    """Identified parameters of the episode's platform (its hidden errors), from a simulated
+    motion-capture campaign with the default noise; cached on disk like the camera calibration."""
+    hidden = cfg.hidden_errors.draw(cfg.seed)
+    noise = MocapNoise()
+    key = hashlib.sha256(json.dumps([CALIBRATION_VERSION, hidden.round(12).tolist(), N_POSES,
+                                     dataclasses.asdict(noise)]).encode()).hexdigest()[:16]
+    path = cache_dir() / f"stewart_parameters_{key}.json"
+    if not path.exists():
+        if log:
+            log(f"calibrating the Stewart platform ({N_POSES} poses, mocap noise "
+                f"{noise.position_m * 1e3:g} mm / {noise.angle_deg:g} deg; cached in {path.parent})")
+        result = calibrate(scene_config(cfg), N_POSES, noise, seed=cfg.seed)
+        save_stewart_parameters(path, result.errors, {"residual_rms_m": result.residual_rms_m,
+                                                      "poses": N_POSES, "noise": dataclasses.asdict(noise)})
+    return path
+
+
+def ablation_arms(base: EpisodeConfig, calibration: Path) -> list[AblationArm]:
+    stewart = dataclasses.replace(base, stewart_correction=True, stewart_calibration=None,
+                                  controller="force_position")
+    calibrated = dataclasses.replace(stewart, stewart_calibration=str(calibration))
+    return [
+        AblationArm("serial robot alone", dataclasses.replace(stewart, stewart_correction=False)),
+        AblationArm("Stewart, uncalibrated model", stewart),
+        AblationArm("Stewart, calibrated model", calibrated),
+        AblationArm("calibrated, impedance control", dataclasses.replace(calibrated, controller="impedance")),
+    ]
+
+
+@dataclass(frozen=True)
+class ArmResult:
+    name: str
+    summary: RunSummary
+    misalignment_mm: float
+    """Mean lateral misalignment at first contact over the holes that touched [mm]."""
+
+    def as_dict(self) -> dict[str, object]:
+        return {"kind": "ablation_arm", "config": self.name, "misalignment_mm": self.misalignment_mm,
+                **{k: v for k, v in self.summary.as_dict().items() if k != "kind"}}
+
+
+def run_ablation(arms: Sequence[AblationArm], episodes: int, workers: int = 1,
+                 on_records: Callable[[list[Record]], None] | None = None,
+                 on_hole: Callable[[Record], None] | None = None) -> tuple[list[ArmResult], list[Record]]:
+    configs, labels = [], []
+    for arm in arms:
+        for cfg in episode_configs(arm.config, episodes):
+            configs.append(cfg)
+            labels.append(arm.name)
+    records = run_many(configs, workers, on_records, on_hole, labels)
+    results = []
+    for arm in arms:
+        mine = [r for r in records if r.get("config") == arm.name]
+        touched = [float(r["lateral_misalignment_mm"]) for r in mine
+                   if r["kind"] == "hole" and not math.isnan(float(r["lateral_misalignment_mm"]))]
+        results.append(ArmResult(arm.name, summarise(mine), statistics.fmean(touched) if touched else float("nan")))
+    return results, records
