@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from sim import collision
 from sim.errors import ConfigError
 from sim.holes import BoreGeometry, add_bore, add_grid_plate, grid_centres
 from sim.physics import PhysicsConfig
@@ -90,14 +91,20 @@ def build_baseplate_spec(
         geom.rgba = list(PLATE_RGBA)
         geom.density = 2700.0  # aluminium
         physics.precision_contact(geom)
+        collision.plate_surface(geom)
 
     centres = config.hole_centres()
     add_grid_plate(body, centres, config.pitch, config.thickness, config.margin, config.window,
                    plate_geom)
     for k, (cx, cy) in enumerate(centres.reshape(-1, 2)):
-        add_bore(body, (float(cx), float(cy)), config.thickness, config.bore(hole_diameters[k]),
-                 plate_geom)
+        add_bore(spec, body, (float(cx), float(cy)), config.thickness, config.bore(hole_diameters[k]),
+                 plate_geom, name=f"bore{k}")
         body.add_site(name=f"hole{k}", pos=[float(cx), float(cy), config.thickness],
                       size=[2e-4, 0, 0], rgba=[1, 0, 0, 0], group=5)
+    seat = body.add_geom(name="seat", type=mujoco.mjtGeom.mjGEOM_BOX,
+                         size=[half_x, half_y, config.thickness / 2], pos=[0, 0, config.thickness / 2])
+    seat.density = 0.0  # the bars and bores carry the plate's mass
+    physics.precision_contact(seat)
+    collision.plate_seat(seat)
     body.add_site(name="top_centre", pos=[0, 0, config.thickness], size=[1e-3, 0, 0], group=5)
     return spec

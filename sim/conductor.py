@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from sim import collision
 from sim.errors import ConfigError
 from sim.physics import PhysicsConfig
 from sim.tolerances import BODY_H6, JOURNAL_H6
@@ -77,6 +78,7 @@ def add_conductor_geoms(
     for geom in geoms:
         geom.density = config.density
         physics.precision_contact(geom)
+    collision.conductor_body(geoms[0])
     body.add_site(name="tip", pos=[0, 0, -lj], size=[1e-4, 0, 0], group=5)
     body.add_site(name="shoulder", pos=[0, 0, 0], size=[1e-4, 0, 0], group=5)
     body.add_site(name="top", pos=[0, 0, lb], size=[1e-4, 0, 0], group=5)

@@ -8,22 +8,43 @@ import mujoco
 import numpy as np
 
 
+class ContactForceProbe:
+    """Total contact force that one group of geoms exerts on another, fast enough to read
+    after every physics substep: the groups are boolean masks over the model's geoms, so the
+    contacts are filtered in one vectorised pass and only the matches are resolved."""
+
+    def __init__(self, model: mujoco.MjModel, geoms: Collection[int],
+                 others: Collection[int] | None = None) -> None:
+        self.model = model
+        self.on = np.zeros(model.ngeom, bool)
+        self.on[list(geoms)] = True
+        self.by = np.ones(model.ngeom, bool)
+        if others is not None:
+            self.by[:] = False
+            self.by[list(others)] = True
+        self._f6 = np.zeros(6)
+
+    def force(self, data: mujoco.MjData) -> np.ndarray:
+        """[N, world frame] on `geoms` from `others` (default: anything)."""
+        total = np.zeros(3)
+        if data.ncon == 0:
+            return total
+        con = data.contact
+        g1, g2 = con.geom1, con.geom2
+        on2 = self.on[g2] & self.by[g1]  # the contact force acts on geom2 along the frame normal
+        on1 = self.on[g1] & self.by[g2]
+        for i in np.flatnonzero(on1 | on2):
+            mujoco.mj_contactForce(self.model, data, int(i), self._f6)
+            sign = 1.0 if on2[i] else -1.0
+            total += sign * con.frame[i].reshape(3, 3).T @ self._f6[:3]
+        return total
+
+
 def contact_force_on(model: mujoco.MjModel, data: mujoco.MjData, geoms: Collection[int],
                      others: Collection[int] | None = None) -> np.ndarray:
-    """Total contact force [N, world frame] that `others` (default: anything) exert on `geoms`."""
-    total = np.zeros(3)
-    f6 = np.zeros(6)
-    for i in range(data.ncon):
-        c = data.contact[i]
-        if c.geom2 in geoms and (others is None or c.geom1 in others):
-            sign = 1.0  # the contact force acts on geom2 along the frame normal
-        elif c.geom1 in geoms and (others is None or c.geom2 in others):
-            sign = -1.0
-        else:
-            continue
-        mujoco.mj_contactForce(model, data, i, f6)
-        total += sign * c.frame.reshape(3, 3).T @ f6[:3]
-    return total
+    """Total contact force [N, world frame] that `others` (default: anything) exert on `geoms`
+    (one-off reads; build a :class:`ContactForceProbe` to read it repeatedly)."""
+    return ContactForceProbe(model, geoms, others).force(data)
 
 
 def body_geoms(model: mujoco.MjModel, body_id: int) -> set[int]:

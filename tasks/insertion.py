@@ -17,7 +17,7 @@ import numpy as np
 from controllers.arm_controller import ControlLaw
 from controllers.arm_laws import CartesianTarget, ForceTarget
 from sim import names
-from sim.contact import body_geoms, contact_force_on
+from sim.contact import ContactForceProbe, body_geoms
 from sim.errors import ConfigError
 from tasks.cell_runtime import CellRuntime
 from tasks.episode_config import Outcome
@@ -77,16 +77,14 @@ class _Truth:
     def __init__(self, rt: CellRuntime, conductor: int, hole: int) -> None:
         m = rt.scene.model
         self.rt, self.hole_site = rt, int(rt.scene.hole_sites[hole])
-        self.part = body_geoms(m, int(rt.scene.conductor_bodies[conductor]))
-        self.plate = {g for g in range(m.ngeom)
-                      if m.body(m.geom_bodyid[g]).name.startswith(names.PLATE)}
+        plate = [g for g in range(m.ngeom) if m.body(m.geom_bodyid[g]).name.startswith(names.PLATE)]
+        self.probe = ContactForceProbe(m, body_geoms(m, int(rt.scene.conductor_bodies[conductor])), plate)
         self.tip = m.site(f"{names.conductor(conductor)}tip").id
         self.shoulder = m.site(f"{names.conductor(conductor)}shoulder").id
         self._sum, self._n = 0.0, 0
 
     def force(self) -> float:
-        d = self.rt.scene.data
-        return float(np.linalg.norm(contact_force_on(self.rt.scene.model, d, self.part, self.plate)))
+        return float(np.linalg.norm(self.probe.force(self.rt.scene.data)))
 
     def accumulate(self) -> None:
         self._sum, self._n = self._sum + self.force(), self._n + 1

@@ -15,7 +15,8 @@ def _free_travel(rig, theta: float) -> float:
     """Lateral travel [m] of the centred journal along theta until it touches the bore."""
     m, d = rig.model, rig.data
     journal = m.geom("journal").id
-    walls = [g for g in range(m.ngeom) if m.geom_bodyid[g] != m.body("carriage").id and m.geom_contype[g]]
+    walls = [g for g in range(m.ngeom) if m.geom_bodyid[g] != m.body("carriage").id
+             and m.geom_conaffinity[g] & m.geom_contype[journal]]  # what the journal can touch
     fromto = np.zeros(6)
 
     def gap(e: float) -> float:
@@ -50,3 +51,19 @@ def test_bore_geometry_rejects_bad_values():
         BoreGeometry(1.7e-3, 4e-3, 1e-4, 4, 4e-3)
     with pytest.raises(ConfigError, match="chamfer"):
         BoreGeometry(1.7e-3, 4e-3, 5e-3, 16, 4e-3)
+
+
+def test_seated_shoulder_rests_on_the_plate_top_through_the_seat_box():
+    """The shoulder lands at the plate top (full depth) on the one seat box, not on the 32 ring
+    and chamfer boxes around the bore (96 contacts that would never sleep on the platform)."""
+    rig = build_rig(RigConfig(hole_diameter=1.706e-3, journal_diameter=1.698e-3))
+    m, d = rig.model, rig.data
+    rig.place(0.0, 2e-4)
+    d.ctrl[2] = 5.0
+    mujoco.mj_step(m, d, nstep=3000)
+    assert abs(rig.depth() - rig.config.conductor.journal_length) <= 1e-6
+    body, seat = m.geom("body").id, m.geom("plate/seat").id
+    touching = {frozenset((int(c.geom1), int(c.geom2))) for c in (d.contact[i] for i in range(d.ncon))}
+    on_body = {pair for pair in touching if body in pair}
+    assert on_body == {frozenset((body, seat))}
+    assert sum(body in (d.contact[i].geom1, d.contact[i].geom2) for i in range(d.ncon)) <= 8
