@@ -127,9 +127,10 @@ class CellRuntime:
 
     def _check_health(self) -> None:
         d = self.scene.data
-        warnings = sum(int(w.number) for w in d.warning)
+        counts = d.warning.number  # one array read: a per-warning Python loop cost 5 % of a cycle
+        warnings = int(counts.sum())
         if warnings > self._warnings:
-            kinds = [mujoco.mjtWarning(i).name for i, w in enumerate(d.warning) if w.number > 0]
+            kinds = [mujoco.mjtWarning(i).name for i in np.flatnonzero(counts)]
             self._warnings = warnings
             raise UnstableSimulation(f"MuJoCo warning ({', '.join(kinds)}) at t = {self.time:.3f} s")
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
