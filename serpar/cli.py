@@ -111,7 +111,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="serpar", description=__doc__.split("\n")[0] if __doc__ else None)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser,
-                                metavar="{info,render,validate,control-check,workspace,vision-check,bench,run,ablate}")
+                                metavar="{info,render,validate,control-check,workspace,vision-check,bench,run,ablate,replay}")
 
     def scene_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--seed", type=int, help="seed of the tolerance draws (integer; default 0)")
@@ -143,7 +143,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--physics", help="physics config YAML (keys of sim.physics.PhysicsConfig)")
     p.set_defaults(func=cmd_validate)
 
-    from serpar import cmd_ablate, cmd_bench, cmd_control_check, cmd_run, cmd_vision_check, cmd_workspace
+    from serpar import (
+        cmd_ablate,
+        cmd_bench,
+        cmd_control_check,
+        cmd_replay,
+        cmd_run,
+        cmd_vision_check,
+        cmd_workspace,
+    )
 
     cmd_control_check.register(sub)
     cmd_run.register(sub)
@@ -151,6 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmd_workspace.register(sub)
     cmd_vision_check.register(sub)
     cmd_bench.register(sub)
+    cmd_replay.register(sub)
     return parser
 
 

@@ -15,7 +15,9 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=int, default=1, help="episodes per configuration (default 1)")
     p.add_argument("--holes", type=int, default=6, help="holes per episode, 1..36 (default 6)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
-    p.add_argument("--workers", type=int, default=2, help="parallel local processes (default 2)")
+    p.add_argument("--workers", type=int, help="parallel local processes (default 2; 1 with --ray)")
+    p.add_argument("--ray", metavar="ADDRESS",
+                   help="run the episodes on a Ray cluster: local, auto or ray://HOST:PORT (cluster extra)")
     p.add_argument("--json", action="store_true", help="JSON lines: every hole, then one line per configuration")
     p.set_defaults(func=cmd_ablate)
     return p
@@ -27,13 +29,17 @@ def _fmt_rate(s) -> str:
 
 
 def cmd_ablate(args: argparse.Namespace) -> int:
+    from serpar.cmd_run import check_ray
     from sim.errors import ConfigError
     from tasks.ablation import ablation_arms, run_ablation, stewart_calibration_file
     from tasks.camera_cache import calibrated_pairs
     from tasks.episode_config import EpisodeConfig
 
+    if args.workers is None:
+        args.workers = 1 if args.ray else 2
     if args.episodes < 1 or args.workers < 1:
         raise ConfigError(f"--episodes {args.episodes}, --workers {args.workers}: both must be >= 1")
+    check_ray(args.ray, args.workers)
     base = EpisodeConfig(seed=args.seed, holes=args.holes)
     def log(message: str) -> None:
         print(message, file=sys.stderr)
@@ -48,14 +54,16 @@ def cmd_ablate(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps(r, default=float), flush=True)
 
+    remote = args.workers > 1 or args.ray is not None  # holes arrive per finished episode
+
     def on_records(records: list[dict]) -> None:
-        if args.workers > 1:
+        if remote:
             for r in records:
                 if r["kind"] == "hole":
                     on_hole(r)
 
     results, records = run_ablation(arms, args.episodes, args.workers, on_records,
-                                    on_hole if args.workers == 1 else None)
+                                    None if remote else on_hole, ray_address=args.ray)
     bar.close()
     if args.json:
         for res in results:

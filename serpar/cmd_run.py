@@ -20,8 +20,15 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="seed of the first episode (default: the config's, 0)")
     p.add_argument("--workers", type=int, default=1,
                    help="episodes in parallel local processes (same results as serial; default 1)")
+    p.add_argument("--ray", metavar="ADDRESS",
+                   help="run the episodes on a Ray cluster instead of local workers: 'local' starts one "
+                        "on this machine, 'auto' joins the running cluster, ray://HOST:PORT a remote one "
+                        "(needs the cluster extra)")
     p.add_argument("--json", action="store_true",
                    help="JSON lines on stdout: one per hole, one per episode, then the summary")
+    p.add_argument("--record", metavar="DIR",
+                   help="record each episode into DIR/episode_<seed>/: signals.parquet + meta.json "
+                        "(docs/recording.md) and episode.rrd for `serpar replay`")
     p.set_defaults(func=cmd_run)
     return p
 
@@ -44,7 +51,35 @@ def episode_config(args: argparse.Namespace):
         raise ConfigError(f"--episodes {args.episodes}: must be >= 1")
     if args.workers < 1:
         raise ConfigError(f"--workers {args.workers}: must be >= 1")
+    check_ray(args.ray, args.workers)
+    if args.record is not None:
+        record_root(args.record)
     return cfg
+
+
+def check_ray(address: str | None, workers: int) -> None:
+    """--ray excludes --workers > 1, and needs Ray installed: both fail before any work."""
+    if address is None:
+        return
+    from sim.errors import ConfigError
+    from tasks.ray_runner import require_ray
+
+    if workers > 1:
+        raise ConfigError(f"--ray and --workers {workers}: choose one (Ray places the episodes on its own CPUs)")
+    require_ray()
+
+
+def record_root(folder: str) -> str:
+    """The --record folder, created now so a bad path fails before any episode runs."""
+    from pathlib import Path
+
+    from sim.errors import ConfigError
+
+    try:
+        Path(folder).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--record {folder}: cannot create the folder ({exc.strerror or exc})") from None
+    return folder
 
 
 def _line(record: dict) -> str:
@@ -65,6 +100,15 @@ def print_summary(summary) -> None:
         print(f"{summary.errors} episode(s) failed to run (error records)")
 
 
+def _print_recordings(root: str, seeds: list[int]) -> None:
+    from tasks.run_episodes import recording_folder
+
+    done = [recording_folder(root, s) for s in seeds if (recording_folder(root, s) / "meta.json").is_file()]
+    if done:
+        print(f"recorded {len(done)} episode(s) in {root}: {', '.join(d.name for d in done)}; "
+              f"view with: serpar replay {done[0] / 'episode.rrd'}", file=sys.stderr)
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from tasks.camera_cache import calibrated_pairs
     from tasks.run_episodes import episode_configs, run_many, summarise
@@ -81,15 +125,20 @@ def cmd_run(args: argparse.Namespace) -> int:
         if args.json:
             print(_line(record), flush=True)
 
+    remote = args.workers > 1 or args.ray is not None  # holes arrive per finished episode
+
     def on_records(records: list[dict]) -> None:
         for r in records:
-            if args.workers > 1 and r["kind"] == "hole":
+            if remote and r["kind"] == "hole":
                 on_hole(r)
             elif r["kind"] != "hole" and args.json:
                 print(_line(r), flush=True)
 
-    records = run_many(configs, args.workers, on_records, on_hole if args.workers == 1 else None)
+    records = run_many(configs, args.workers, on_records, None if remote else on_hole,
+                       record_dir=args.record, ray_address=args.ray)
     bar.close()
+    if args.record:
+        _print_recordings(args.record, [c.seed for c in configs])
     summary = summarise(records)
     if args.json:
         print(_line(summary.as_dict()))

@@ -39,6 +39,12 @@ TORQUE_LIMITS: tuple[float, ...] = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
 Q_MIN: tuple[float, ...] = (-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973)
 Q_MAX: tuple[float, ...] = (2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973)
 
+PANDA_COULOMB_FRICTION: tuple[float, ...] = tuple(phi / 2 for phi in (
+    0.54615, 0.87224, 0.64068, 1.2794, 0.83904, 0.30301, 0.56489))
+"""Dry joint friction of a real Panda [N m]: half the swing phi_1 of the sigmoid friction model
+identified by Gaz et al. (IEEE RA-L 2019, "Dynamic identification of the Franka Emika Panda"),
+i.e. its level at speed on either side of zero."""
+
 LINK_NAMES: tuple[str, ...] = tuple(f"link{i}" for i in range(8))
 HAND_BODY = "hand"
 FINGER_BODIES: tuple[str, str] = ("finger_left", "finger_right")

@@ -45,12 +45,18 @@ class SceneConfig:
     tray_height: float = 0.22
     """Height of the tray's bottom face on its pedestal [m]."""
     backlight_position: tuple[float, float, float] = (0.45, -0.17, 0.35)
+    arm_joint_friction: tuple[float, ...] = ()
+    """Dry friction per arm joint [N m] (MuJoCo frictionloss), a property of the plant that the
+    arm controllers do not model; () = frictionless (the nominal model)."""
     calibration_board: CheckerboardConfig | None = None
     """A checkerboard mounted on the hand for camera calibration (None: the working gripper only)."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.seed, int) or isinstance(self.seed, bool):
             raise ConfigError(f"seed must be an integer, got {self.seed!r}")
+        friction = self.arm_joint_friction
+        if friction and (len(friction) != len(JOINT_NAMES) or not all(0 <= f <= 20 for f in friction)):
+            raise ConfigError(f"arm_joint_friction {friction}: () or {len(JOINT_NAMES)} values in 0..20 N m")
         if not 0 <= self.n_conductors <= self.tray.n_pockets:
             raise ConfigError(f"n_conductors={self.n_conductors}: valid 0..{self.tray.n_pockets} (tray pockets)")
         if self.tolerance_distribution not in DISTRIBUTIONS:
@@ -113,7 +119,10 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
     cfg.physics.apply(spec)
     _add_environment(spec, cfg)
     world = spec.worldbody
-    spec.attach(build_arm_spec(), prefix=names.ARM, frame=world.add_frame(pos=[0, 0, 0]))
+    arm = build_arm_spec()
+    for joint, friction in zip(JOINT_NAMES, cfg.arm_joint_friction):
+        arm.joint(joint).frictionloss = friction
+    spec.attach(arm, prefix=names.ARM, frame=world.add_frame(pos=[0, 0, 0]))
     for pad in PAD_GEOMS:
         # Friction is a damper on slip velocity with rate 2/timeconst: a held part slides along the
         # pads by ~(hand speed)/rate on every move (0.6 mm per 0.2 m move at 0.01 s; README).

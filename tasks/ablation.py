@@ -25,8 +25,10 @@ from tasks.run_episodes import Record, RunSummary, episode_configs, run_many, su
 from tasks.stewart_campaign import N_POSES, MocapNoise, calibrate
 from tasks.stewart_params import save_stewart_parameters
 
-CALIBRATION_VERSION = 1
-"""Bump when the Stewart campaign or solver changes (invalidates cached parameter files)."""
+CALIBRATION_VERSION = 2
+"""Bump when the Stewart campaign, solver or the simulated cell changes (invalidates cached
+parameter files). 2: wedge bores (lighter plate) and the commander starting from its model's
+reading of the legs in force."""
 
 
 @dataclass(frozen=True)
@@ -79,13 +81,14 @@ class ArmResult:
 
 def run_ablation(arms: Sequence[AblationArm], episodes: int, workers: int = 1,
                  on_records: Callable[[list[Record]], None] | None = None,
-                 on_hole: Callable[[Record], None] | None = None) -> tuple[list[ArmResult], list[Record]]:
+                 on_hole: Callable[[Record], None] | None = None,
+                 ray_address: str | None = None) -> tuple[list[ArmResult], list[Record]]:
     configs, labels = [], []
     for arm in arms:
         for cfg in episode_configs(arm.config, episodes):
             configs.append(cfg)
             labels.append(arm.name)
-    records = run_many(configs, workers, on_records, on_hole, labels)
+    records = run_many(configs, workers, on_records, on_hole, labels, ray_address=ray_address)
     results = []
     for arm in arms:
         mine = [r for r in records if r.get("config") == arm.name]

@@ -13,11 +13,13 @@ import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from controllers.arm_controller import ControlLaw
+from sim.arm import PANDA_COULOMB_FRICTION
 from sim.errors import SimError, UnstableSimulation
 from sim.scene import Scene, SceneConfig, build_scene
 from sim.stewart import StewartConfig
@@ -75,9 +77,12 @@ class EpisodeSummary:
 
 
 def scene_config(cfg: EpisodeConfig) -> SceneConfig:
-    """The cell of an episode: its seed's tolerance draw and the hidden Stewart errors."""
+    """The cell of an episode: its seed's tolerance draw, the hidden Stewart errors and the
+    arm's joint friction."""
+    friction = tuple(cfg.arm_friction * f for f in PANDA_COULOMB_FRICTION) if cfg.arm_friction else ()
     return SceneConfig(seed=cfg.seed, tolerance_distribution=cfg.tolerance_distribution,
-                       stewart=StewartConfig(joint_errors=cfg.hidden_errors.draw(cfg.seed)))
+                       stewart=StewartConfig(joint_errors=cfg.hidden_errors.draw(cfg.seed)),
+                       arm_joint_friction=friction)
 
 
 def _believed_errors(cfg: EpisodeConfig) -> np.ndarray | None:
@@ -87,7 +92,7 @@ def _believed_errors(cfg: EpisodeConfig) -> np.ndarray | None:
 def build_runtime(cfg: EpisodeConfig) -> tuple[CellRuntime, PlateCommander]:
     scene: Scene = build_scene(scene_config(cfg))
     rt = CellRuntime.create(scene, controller_config(cfg.sensor_noise), seed=cfg.seed)
-    plate = PlateCommander.create(scene.model, scene.config.stewart, _believed_errors(cfg))
+    plate = PlateCommander.create(scene.model, scene.data, scene.config.stewart, _believed_errors(cfg))
     rt.observers.append(lambda r: plate.update(r.scene.data, r.time))
     return rt, plate
 
@@ -119,12 +124,22 @@ class _Snapshot:
 
 def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
                 on_record: Callable[[HoleRecord], None] | None = None,
-                runtime: tuple[CellRuntime, PlateCommander] | None = None) -> EpisodeSummary:
-    """Fill the holes of `cfg`; `on_record` receives each hole's record as it ends."""
+                runtime: tuple[CellRuntime, PlateCommander] | None = None,
+                recording: str | Path | None = None) -> EpisodeSummary:
+    """Fill the holes of `cfg`; `on_record` receives each hole's record as it ends; `recording`
+    names a folder for the episode's recording (signals, meta.json, episode.rrd)."""
     t_wall = time.perf_counter()
     rt, plate = runtime or build_runtime(cfg)
     imaging = ImagingConfig(width=cfg.camera_width) if cfg.sensor_noise else ImagingConfig.ideal(cfg.camera_width)
     camera = Camera(rt.scene.model, imaging, seed=cfg.seed)
+    recorder = None
+    if recording is not None:
+        from tasks.episode_recorder import EpisodeRecorder
+
+        recorder = EpisodeRecorder(rt, recording, {"episode_config": dataclasses.asdict(cfg)},
+                                   name=f"episode_{cfg.seed}")
+        rt.observers.append(recorder)
+        camera.on_frames = recorder.frames
     law = ControlLaw.FORCE_POSITION if cfg.controller == "force_position" else ControlLaw.IMPEDANCE
     cycle = HoleCycle(rt, plate, camera, pairs, cfg, law)
     counts = {o.value: 0 for o in Outcome}
@@ -149,6 +164,8 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
                                 result.insertion_time_s, result.depth_shortfall_mm, result.clearance_um,
                                 rt.time - t0, time.perf_counter() - w0, broken,
                                 cycle.phase_durations(rt.time))
+            if recorder is not None:  # before a restore turns the clock back
+                recorder.note(f"hole {record.hole}: {record.outcome} ({record.reason})")
             if broken:
                 snap.restore(rt, plate)
             counts[record.outcome] += 1
@@ -156,4 +173,7 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
                 on_record(record)
     finally:
         camera.close()
+        if recorder is not None:  # also after an error: the recording shows how it got there
+            rt.observers.remove(recorder)
+            recorder.close()
     return EpisodeSummary(cfg.seed, n, counts["success"], counts, rt.time, time.perf_counter() - t_wall)

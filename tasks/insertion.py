@@ -82,6 +82,8 @@ class _Truth:
         self.tip = m.site(f"{names.conductor(conductor)}tip").id
         self.shoulder = m.site(f"{names.conductor(conductor)}shoulder").id
         self._sum, self._n = 0.0, 0
+        self.bore_start = rt.scene.config.baseplate.chamfer
+        """Depth below the entry where the straight bore begins (the chamfer's foot) [m]."""
 
     def force(self) -> float:
         return float(np.linalg.norm(self.probe.force(self.rt.scene.data)))
@@ -172,8 +174,8 @@ def _classify(truth: _Truth, config: InsertionConfig, peak: float, lateral: floa
         outcome, reason = Outcome.SUCCESS, "seated"
     elif timed_out:
         outcome, reason = Outcome.TIMEOUT, f"not seated after {config.time_limit_s:g} s"
-    elif truth.tip_depth() <= 0.0:
-        outcome, reason = Outcome.ALIGN_FAIL, f"tip on the surface, {lateral * 1e3:.3f} mm off axis"
+    elif truth.tip_depth() <= truth.bore_start:  # never entered the straight bore
+        outcome, reason = Outcome.ALIGN_FAIL, f"tip on the rim or chamfer, {lateral * 1e3:.3f} mm off axis"
     else:
         outcome, reason = Outcome.JAM, f"stuck {shortfall * 1e3:.3f} mm short of seated"
     return InsertionResult(outcome, reason, peak, lateral * 1e3, t_ins, max(shortfall, 0.0) * 1e3)

@@ -1,4 +1,5 @@
-"""Many episodes: seeds -> records, in this process or in worker processes, and the summary.
+"""Many episodes: seeds -> records, in this process, in worker processes or on Ray
+(:mod:`tasks.ray_runner`), and the summary.
 
 Each episode depends only on its config (seed included), so a run with W workers gives the
 same records as a serial run. Records stream to a callback as they arrive (JSON lines on
@@ -9,15 +10,20 @@ raises is reported as an error record and the run goes on.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import statistics
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
+from pathlib import Path
 
+from sim.errors import ConfigError
 from tasks.episode_config import EpisodeConfig, Outcome, wilson_interval
 
 Record = dict[str, object]
+Job = Callable[..., list[Record]]
+"""Per-config work: job(cfg, on_hole, label) -> records; module-level so workers can unpickle it."""
 
 
 def episode_configs(base: EpisodeConfig, episodes: int, first_seed: int | None = None) -> list[EpisodeConfig]:
@@ -26,11 +32,18 @@ def episode_configs(base: EpisodeConfig, episodes: int, first_seed: int | None =
     return [dataclasses.replace(base, seed=start + k) for k in range(episodes)]
 
 
+def recording_folder(root: str | Path, seed: int, label: str | None = None) -> Path:
+    """Where an episode's recording goes: ROOT/episode_<seed>/ (ROOT/<label>/... when labelled)."""
+    base = Path(root) if label is None else Path(root) / label
+    return base / f"episode_{seed}"
+
+
 def run_one(cfg: EpisodeConfig, on_hole: Callable[[Record], None] | None = None,
-            label: str | None = None) -> list[Record]:
+            label: str | None = None, record_dir: str | None = None) -> list[Record]:
     """One episode's hole records and its summary record, as plain dicts (picklable);
     `on_hole` (in-process runs only) sees each hole record as it ends; `label` (e.g. the
-    ablation arm) is written into every record as "config"."""
+    ablation arm) is written into every record as "config"; `record_dir` records the episode
+    into :func:`recording_folder` (the records are the same either way)."""
     tag = {} if label is None else {"config": label}
     from tasks.camera_cache import calibrated_pairs
     from tasks.episode import run_episode
@@ -43,7 +56,12 @@ def run_one(cfg: EpisodeConfig, on_hole: Callable[[Record], None] | None = None,
             on_hole(records[-1])
 
     try:
-        summary = run_episode(cfg, calibrated_pairs(cfg.camera_width), on_record=keep)
+        if cfg.stewart_calibration is not None:  # a bad file fails here, before any camera calibration
+            from tasks.stewart_params import load_stewart_parameters
+
+            load_stewart_parameters(cfg.stewart_calibration)
+        folder = None if record_dir is None else recording_folder(record_dir, cfg.seed, label)
+        summary = run_episode(cfg, calibrated_pairs(cfg.camera_width), on_record=keep, recording=folder)
         records.append({**summary.as_dict(), **tag})
     except Exception as exc:  # noqa: BLE001 - one bad episode must not end the run
         records.append({"kind": "error", "episode_seed": cfg.seed, "error": f"{type(exc).__name__}: {exc}", **tag})
@@ -53,34 +71,50 @@ def run_one(cfg: EpisodeConfig, on_hole: Callable[[Record], None] | None = None,
 def run_many(configs: Sequence[EpisodeConfig], workers: int = 1,
              on_records: Callable[[list[Record]], None] | None = None,
              on_hole: Callable[[Record], None] | None = None,
-             labels: Sequence[str | None] | None = None) -> list[Record]:
+             labels: Sequence[str | None] | None = None, record_dir: str | None = None,
+             job: Job | None = None, ray_address: str | None = None) -> list[Record]:
     """Run every config; `on_records` gets each episode's records as it finishes, `on_hole`
     each hole record as it ends (in-process runs; workers report per episode); `labels[k]`
-    tags config k's records. On Ctrl-C the records of finished episodes are returned and the
+    tags config k's records; `record_dir` records every episode (see :func:`run_one`); `job`
+    replaces :func:`run_one`; `ray_address` runs the episodes on Ray instead of local workers
+    (:mod:`tasks.ray_runner`). On Ctrl-C the records of finished episodes are returned and the
     workers are stopped."""
     out: list[Record] = []
     tags = list(labels) if labels is not None else [None] * len(configs)
     if len(tags) != len(configs):
         raise ValueError(f"{len(tags)} labels for {len(configs)} configs")
+    if ray_address is not None and workers > 1:
+        raise ConfigError(f"--ray and --workers {workers}: choose one (Ray places the episodes on its own CPUs)")
+    work = job or run_one  # looked up now, not at import: tests replace run_one
+    if record_dir is not None:
+        work = functools.partial(work, record_dir=record_dir)
+    results = _results(configs, workers, on_hole, tags, work, ray_address)
     try:
-        for records in _results(configs, workers, on_hole, tags):
+        for records in results:
             out += records
             if on_records:
                 on_records(records)
     except KeyboardInterrupt:
         out.append({"kind": "interrupted", "episodes_done": sum(r["kind"] == "episode" for r in out)})
+    finally:
+        results.close()  # stops the workers now, not whenever the generator is collected
     return out
 
 
 def _results(configs: Sequence[EpisodeConfig], workers: int, on_hole: Callable[[Record], None] | None,
-             labels: Sequence[str | None]) -> Iterator[list[Record]]:
+             labels: Sequence[str | None], job: Job, ray_address: str | None) -> Iterator[list[Record]]:
+    if ray_address is not None:
+        from tasks.ray_runner import ray_results
+
+        yield from ray_results(configs, labels, job, ray_address)
+        return
     if workers <= 1:
         for cfg, label in zip(configs, labels):
-            yield run_one(cfg, on_hole, label)
+            yield job(cfg, on_hole, label)
         return
     pool = ProcessPoolExecutor(max_workers=workers)
     try:
-        pending: set[Future] = {pool.submit(run_one, cfg, None, label) for cfg, label in zip(configs, labels)}
+        pending: set[Future] = {pool.submit(job, cfg, None, label) for cfg, label in zip(configs, labels)}
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:

@@ -71,7 +71,7 @@ def measure(scene_cfg: SceneConfig, pos: np.ndarray, rot: np.ndarray, believed: 
     with `believed` errors (None = nominal); returns commanded strokes and mocap poses."""
     scene = build_scene(dataclasses.replace(scene_cfg, n_conductors=0))
     rt = CellRuntime.create(scene, controller_config(noise=False), seed=seed)
-    plate = PlateCommander.create(scene.model, scene_cfg.stewart, believed)
+    plate = PlateCommander.create(scene.model, scene.data, scene_cfg.stewart, believed)
     rt.observers.append(lambda r: plate.update(r.scene.data, r.time))
     rng = np.random.default_rng(seed + 7919)
     strokes, mpos, mrot = [], [], []

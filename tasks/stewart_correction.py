@@ -20,7 +20,7 @@ import numpy as np
 
 from controllers.arm_laws import orientation_error
 from controllers.rotations import so3_exp
-from controllers.stewart_kinematics import StewartGeometry, require_pose
+from controllers.stewart_kinematics import StewartGeometry, forward_kinematics, require_pose
 from controllers.stewart_servo import StewartServo
 from sim import names
 from sim.stewart import MAX_JOINT_ERROR, StewartConfig, built_geometry
@@ -80,12 +80,18 @@ class PlateCommander:
     _ramp: tuple[np.ndarray, np.ndarray, float, float] | None = field(default=None, repr=False)
 
     @classmethod
-    def create(cls, model: mujoco.MjModel, cfg: StewartConfig, believed: np.ndarray | None) -> PlateCommander:
-        """`believed`: the (6, 7) joint errors the model uses (identified ones), or None."""
+    def create(cls, model: mujoco.MjModel, data: mujoco.MjData, cfg: StewartConfig,
+               believed: np.ndarray | None) -> PlateCommander:
+        """`believed`: the (6, 7) joint errors the model uses (identified ones), or None.
+
+        The pose in force is where the model puts the legs' current commands (the cell starts
+        on the nominal home strokes): a calibrated model places them up to millimetres from
+        the nominal home, and assuming home would offset every later move by that much."""
         geometry, dl = built_geometry(dataclasses.replace(cfg, joint_errors=believed))
         servo = StewartServo.from_model(model, geometry, names.STEWART, match_tol=2 * MAX_JOINT_ERROR)
-        home = transform(np.eye(3), np.asarray(cfg.home_pos, float))
-        return cls(servo, dl, platform_T_plate(model), home)
+        in_force = data.ctrl[list(servo.actuator_ids)]
+        pos, rot, _ = forward_kinematics(geometry, in_force + dl, np.asarray(cfg.home_pos, float))
+        return cls(servo, dl, platform_T_plate(model), transform(rot, pos))
 
     @property
     def geometry(self) -> StewartGeometry:

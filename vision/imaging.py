@@ -7,6 +7,7 @@ real cell's frames are, from a seeded generator so every run is reproducible.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -89,13 +90,18 @@ class Camera:
         self.config = config
         self.rng = np.random.default_rng(seed)
         self._renderer = CameraRenderer(model)
+        self.on_frames: Callable[[dict[str, np.ndarray]], None] | None = None
+        """Sees every shot's frames (e.g. a recorder); None costs nothing."""
 
     def shoot(self, data: mujoco.MjData, cameras: tuple[str, ...]) -> dict[str, np.ndarray]:
         """One frame per camera in `cameras`, taken together (same lighting, independent noise)."""
         w, h = self.config.size
         with _varied_lights(self.model, self.config, self.rng):
             frames = {name: self._renderer.render(data, name, w, h) for name in cameras}
-        return {name: add_sensor_noise(img, self.config, self.rng) for name, img in frames.items()}
+        shot = {name: add_sensor_noise(img, self.config, self.rng) for name, img in frames.items()}
+        if self.on_frames is not None:
+            self.on_frames(shot)
+        return shot
 
     def close(self) -> None:
         self._renderer.close()

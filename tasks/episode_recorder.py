@@ -1,0 +1,197 @@
+"""Recording an episode (``serpar run --record``): the schema's signals at 1 kHz
+(docs/recording.md) and a rerun file with the scene, body poses, camera frames and phases.
+
+An observer of the :class:`CellRuntime`, called after each control period's physics step.
+Row k is time t_k, the start of period k: what the arm's sensors read at t_k (the
+controller's input), the torque and wrench estimate it computed from them, and the plant
+state at t_k (legs, platform, gripper, contact), kept from the previous call. After a state
+restore (a broken cycle) the cell's clock jumps back; the recording's ``time`` goes on
+(``x_sim_time`` is the cell's clock) and the period with the stale plant sample is skipped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from sim import names
+from sim.recording import PhaseSegment, Recording, RecordingMeta, SignalRecorder, write_recording
+from tasks.cell_runtime import CellRuntime
+
+POSE_HZ = 50.0
+"""Body poses for the rerun file (the signals are at the control rate)."""
+RRD_NAME = "episode.rrd"
+
+
+def _n(prefix: str, k: int) -> tuple[str, ...]:
+    return tuple(f"{prefix}{i}" for i in range(1, k + 1))
+
+
+_XYZQ = ("x", "y", "z", "qw", "qx", "qy", "qz")
+ARM = ("time", *_n("q", 7), *_n("dq", 7), *_n("tau_J", 7), *_n("tau_J_d", 7), *_n("O_F_ext_hat_K", 6),
+       *(f"O_T_EE_{a}" for a in _XYZQ))
+PLANT = (*_n("leg_cmd", 6), *_n("leg", 6), *(f"platform_{a}" for a in _XYZQ), "gripper_width",
+         "contact_force_x", "contact_force_y", "contact_force_z")
+CHANNELS = (ARM[0], "phase", *ARM[1:], *PLANT, "x_sim_time")
+_I = {c: i for i, c in enumerate(c for c in CHANNELS if c != "phase")}
+
+
+def _span(first: str, last: str) -> slice:
+    return slice(_I[first], _I[last] + 1)
+
+
+Q, DQ, TJ, TJD = _span("q1", "q7"), _span("dq1", "dq7"), _span("tau_J1", "tau_J7"), _span("tau_J_d1", "tau_J_d7")
+F, EE_P, EE_Q = _span("O_F_ext_hat_K1", "O_F_ext_hat_K6"), _span("O_T_EE_x", "O_T_EE_z"), _span("O_T_EE_qw", "O_T_EE_qz")
+PL = _span("leg_cmd1", "contact_force_z")
+NOTES = {
+    "time": "start of each 1 ms control period; continues across state restores (x_sim_time is the cell's clock)",
+    "q, dq, tau_J": "the arm's sensor model (20-bit encoders, velocity and joint torque noise, torque bias drift)",
+    "tau_J_d": "joint torques commanded from that sample (saturated), applied over the period",
+    "O_F_ext_hat_K": "the controller's external wrench estimate at the TCP, arm base frame (zeroed by each tare)",
+    "O_T_EE": "TCP pose from the nominal arm model at the measured joints, arm base frame",
+    "leg_cmd, leg": "leg lengths l_min + stroke: commanded, and the simulated stroke (no encoder noise; "
+                    "the hidden leg-length errors are not in either)",
+    "platform": "true platform pose (site platform_centre) in the Stewart base frame",
+    "contact_force": "total contact force the conductors exert on the baseplate, world frame, "
+                     "at the period's last physics substep (not a 1 ms mean); seated parts' weight included",
+}
+
+
+class EpisodeRecorder:
+    """Attach with ``rt.observers.append(recorder)`` (and ``camera.on_frames = recorder.frames``);
+    :meth:`close` writes signals, meta.json and the rerun file into `folder`."""
+
+    def __init__(self, rt: CellRuntime, folder: str | Path, model: dict[str, object],
+                 name: str = "episode") -> None:
+        from tasks import rerun_scene
+
+        self.rt, self.folder, self.model = rt, Path(folder), model
+        self.folder.mkdir(parents=True, exist_ok=True)
+        m, d = rt.scene.model, rt.scene.data
+        self._dt = rt.dt
+        self._signals = SignalRecorder(CHANNELS, capacity=1 << 16)
+        self._row = np.zeros(len(_I))
+        self._plant = np.zeros(PL.stop - PL.start)
+        self._quat = np.zeros(4)
+        self._legs = np.array(rt.stewart.actuator_ids)
+        self._leg_qpos = m.jnt_qposadr[m.actuator_trnid[self._legs, 0]]
+        self._l_min = rt.stewart.geometry.l_min
+        self._fingers = tuple(int(a) for a in rt.gripper.finger_qpos)
+        base = rt.stewart.base_body  # welded to the world: its frame is read once
+        self._base_rt, self._base_pos = d.xmat[base].reshape(3, 3).T.copy(), d.xpos[base].copy()
+        side = np.zeros(m.ngeom + 1, np.int8)  # 1: baseplate geom, 2: conductor geom (index -1: none)
+        side[:-1][m.geom_bodyid == m.body(names.PLATE + "baseplate").id] = 1
+        side[:-1][np.isin(m.geom_bodyid, [b for b in range(m.nbody) if m.body(b).name.startswith("conductor")])] = 2
+        self._side = side
+        self._t_prev, self._offset, self._last = rt.time, 0.0, -np.inf
+        self._phase_names: list[str] = []
+        self._phase_starts: list[float] = []
+        self._calls, self._pose_every = 0, max(1, round(1.0 / (POSE_HZ * rt.dt)))
+        self._rr = rerun_scene
+        self._rec = rerun_scene.open_stream(self.folder / RRD_NAME, name)
+        rerun_scene.log_geometry(self._rec, m)
+        self._poses = rerun_scene.PoseTrack(self._rec, m, d)
+        self._sample_plant()
+        self._poses.sample(d, rt.time)
+
+    # --- the 1 kHz path ------------------------------------------------------------------
+    def __call__(self, rt: CellRuntime) -> None:
+        t_meas, self._t_prev = self._t_prev, rt.time
+        if abs(rt.time - self._dt - t_meas) > 0.5 * self._dt:  # state restored: plant sample is stale
+            self._offset = max(self._offset, self._last + 2 * self._dt - rt.time)  # time goes on
+            self._sample_plant()
+            return
+        arm, row = rt.arm, self._row
+        meas = arm.measurement
+        t = t_meas + self._offset
+        row[0] = t
+        row[Q], row[DQ], row[TJ], row[TJD], row[F] = meas.q, meas.dq, meas.tau_J, arm.tau, arm.wrench
+        nominal = arm.nominal
+        site = nominal.index.tcp_site
+        row[EE_P] = nominal.data.site_xpos[site]
+        mujoco.mju_mat2Quat(self._quat, nominal.data.site_xmat[site])
+        row[EE_Q] = self._quat
+        row[PL] = self._plant
+        row[-1] = t_meas
+        if not self._phase_names or rt.phase != self._phase_names[-1]:
+            self._phase_names.append(rt.phase)
+            self._phase_starts.append(t)
+            self._rr.log_text(self._rec, "phase", rt.phase, t)
+        self._last = t
+        self._signals.append_row(row, rt.phase)
+        self._sample_plant()
+        self._calls += 1
+        if self._calls % self._pose_every == 0:
+            self._poses.sample(rt.scene.data, rt.time + self._offset)
+
+    def _sample_plant(self) -> None:
+        m, d, p, base = self.rt.scene.model, self.rt.scene.data, self._plant, PL.start
+        p[0:6] = d.ctrl[self._legs]
+        p[6:12] = d.qpos[self._leg_qpos]
+        p[0:12] += self._l_min
+        site, rbt = self.rt.stewart.platform_site, self._base_rt
+        p[_I["platform_x"] - base:_I["platform_z"] - base + 1] = rbt @ (d.site_xpos[site] - self._base_pos)
+        mujoco.mju_mat2Quat(self._quat, (rbt @ d.site_xmat[site].reshape(3, 3)).ravel())
+        p[_I["platform_qw"] - base:_I["platform_qz"] - base + 1] = self._quat
+        p[_I["gripper_width"] - base] = d.qpos[self._fingers[0]] + d.qpos[self._fingers[1]]
+        p[-3:] = self._contact_force(m, d)
+
+    def _contact_force(self, m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
+        if d.ncon == 0:
+            return np.zeros(3)
+        con = d.contact
+        code = self._side[con.geom] @ np.array([3, 1], np.int8)  # 7: plate is geom2, 5: plate is geom1
+        idx = np.flatnonzero((code == 7) | (code == 5))
+        adr = con.efc_address[idx]
+        idx, adr = idx[adr >= 0], adr[adr >= 0]
+        if not len(idx):
+            return np.zeros(3)
+        if m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC:  # efc_force is the force in the contact frame
+            f = d.efc_force[adr[:, None] + np.arange(3)]
+        else:
+            f, f6 = np.empty((len(idx), 3)), np.empty(6)
+            for k, i in enumerate(idx):
+                mujoco.mj_contactForce(m, d, i, f6)
+                f[k] = f6[:3]
+        sign = np.where(code[idx] == 7, 1.0, -1.0)  # the force acts on geom2 along the frame normal
+        return np.einsum("n,nk,nkj->j", sign, f, con.frame[idx].reshape(-1, 3, 3))
+
+    # --- rare events ---------------------------------------------------------------------
+    def frames(self, frames: dict[str, np.ndarray]) -> None:
+        """Camera hook: the shot's frames into the rerun file at the current time."""
+        d = self.rt.scene.data
+        self._rr.log_frames(self._rec, self.rt.scene.model, d, frames, self.rt.time + self._offset)
+
+    def note(self, text: str) -> None:
+        """An annotation in the rerun file (e.g. how a hole ended)."""
+        self._rr.log_text(self._rec, "events", text, self.rt.time + self._offset)
+
+    def recording(self) -> Recording:
+        """What has been recorded so far, in the schema (DESIGN.md §4)."""
+        sensors = self.rt.arm.config.sensors
+        step = 2 * np.pi / sensors.encoder_counts_per_rev if sensors.encoder_counts_per_rev else 0.0
+        sigma = {**{c: step / np.sqrt(12) for c in _n("q", 7)},  # uniform quantisation error
+                 **{c: sensors.velocity_noise_std for c in _n("dq", 7)},
+                 **{c: sensors.torque_noise_std for c in _n("tau_J", 7)}}
+        model = json.loads(json.dumps({**self.model, "arm_sensors": dataclasses.asdict(sensors),
+                                       "stewart_l_min": self._l_min, "channel_notes": NOTES}, default=str))
+        time = self._signals.column("time")  # a phase ends at its last row
+        ends = [*time[np.searchsorted(time, self._phase_starts[1:]) - 1], self._last]
+        phases = tuple(PhaseSegment(n, s, float(e)) for n, s, e in zip(self._phase_names, self._phase_starts, ends))
+        meta = RecordingMeta(source="sim", sample_rate_hz=1.0 / self._dt, channels=CHANNELS, noise_sigma=sigma,
+                             phases=phases, model=model)
+        return Recording(meta, self._signals.table())
+
+    def close(self) -> Path:
+        """Write signals.parquet and meta.json, finish the rerun file; returns the folder."""
+        write_recording(self.folder, self.recording())
+        self._poses.send(self._rec)
+        self._rr.send_signals(self._rec, self._signals.column("time"),
+                              {c: self._signals.column(c) for c in CHANNELS if c not in ("time", "phase", "x_sim_time")})
+        self._rec.flush()
+        self._rec.disconnect()
+        return self.folder

@@ -1,0 +1,80 @@
+"""Episodes on a Ray cluster (``--ray ADDRESS``; the optional ``cluster`` extra).
+
+One Ray task per config, running the same per-config job as the local workers; results
+stream back in completion order. Ray is imported only here, only when asked for.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+from sim.errors import ConfigError
+from tasks.episode_config import EpisodeConfig
+
+RAY_MISSING = "--ray needs the cluster extra: pip install 'serpar[cluster]'"
+
+
+def require_ray() -> Any:
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError(RAY_MISSING) from None
+    return ray
+
+
+def _call(job: Any, cfg: EpisodeConfig, label: str | None) -> list[dict[str, object]]:
+    return job(cfg, None, label)
+
+
+def _connect(ray: Any, address: str) -> bool:
+    """Join `address` ("local": a new instance on this machine, "auto": the running cluster,
+    "ray://host:port": a remote one); True if this call started Ray here."""
+    if ray.is_initialized():  # a caller (or a test) already runs Ray: use it, leave it running
+        return False
+    from tasks.camera_cache import cache_dir
+
+    # workers on this machine then find the driver's calibration cache and source tree; other
+    # machines need the same paths (a shared SERPAR_CACHE) or calibrate there once
+    env = {"SERPAR_CACHE": str(cache_dir().absolute())}
+    if os.environ.get("PYTHONPATH"):
+        env["PYTHONPATH"] = os.pathsep.join(os.path.abspath(p) for p in os.environ["PYTHONPATH"].split(os.pathsep))
+    extra = {"include_dashboard": False} if address == "local" else {}
+    try:
+        ray.init(address=address, runtime_env={"env_vars": env}, log_to_driver=False, **extra)
+    except (ConnectionError, ValueError, RuntimeError) as exc:
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise ConfigError(f"--ray {address}: cannot connect ({first}); valid: local, auto, "
+                          "ray://HOST:PORT or a cluster's HOST:PORT") from None
+    return True
+
+
+def ray_results(configs: Sequence[EpisodeConfig], labels: Sequence[str | None], job: Any,
+                address: str) -> Iterator[list[dict[str, object]]]:
+    """Each config's records as its task finishes (a task that dies, e.g. its worker killed,
+    gives an error record); on exit (done, Ctrl-C, error) the pending tasks are cancelled and
+    a Ray instance started here is shut down."""
+    ray = require_ray()
+    started = _connect(ray, address)
+    tasks: dict[Any, tuple[EpisodeConfig, str | None]] = {}
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(_call)
+        job_ref = ray.put(job)
+        tasks = {remote.remote(job_ref, cfg, label): (cfg, label) for cfg, label in zip(configs, labels)}
+        pending = list(tasks)
+        while pending:
+            (ref,), pending = ray.wait(pending, num_returns=1)
+            cfg, label = tasks.pop(ref)
+            try:
+                records = ray.get(ref)
+            except ray.exceptions.RayError as exc:
+                tag = {} if label is None else {"config": label}
+                records = [{"kind": "error", "episode_seed": cfg.seed, "error": f"{type(exc).__name__}: "
+                            f"{(str(exc).strip().splitlines() or [''])[0]}", **tag}]
+            yield records
+    finally:
+        for ref in tasks:
+            ray.cancel(ref, force=True)
+        if started:
+            ray.shutdown()
