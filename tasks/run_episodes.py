@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import multiprocessing
 import statistics
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -112,7 +113,9 @@ def _results(configs: Sequence[EpisodeConfig], workers: int, on_hole: Callable[[
         for cfg, label in zip(configs, labels):
             yield job(cfg, on_hole, label)
         return
-    pool = ProcessPoolExecutor(max_workers=workers)
+    # spawn, not fork: a child forked after this process has rendered inherits its EGL context
+    # and can hang in the first render (seen in `serpar bench --episode`).
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     try:
         pending: set[Future] = {pool.submit(job, cfg, None, label) for cfg, label in zip(configs, labels)}
         while pending:
