@@ -32,12 +32,22 @@ class ContactForceProbe:
         con = data.contact
         g1, g2 = con.geom1, con.geom2
         on2 = self.on[g2] & self.by[g1]  # the contact force acts on geom2 along the frame normal
-        on1 = self.on[g1] & self.by[g2]
-        for i in np.flatnonzero(on1 | on2):
-            mujoco.mj_contactForce(self.model, data, int(i), self._f6)
-            sign = 1.0 if on2[i] else -1.0
-            total += sign * con.frame[i].reshape(3, 3).T @ self._f6[:3]
-        return total
+        idx = np.flatnonzero(on2 | (self.on[g1] & self.by[g2]))
+        adr = con.efc_address[idx]
+        idx, adr = idx[adr >= 0], adr[adr >= 0]  # excluded contacts carry no force
+        if not len(idx):
+            return total
+        if self.model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC:  # efc_force is in the contact frame
+            k = np.arange(3)
+            dim = con.dim[idx][:, None]  # a frictionless (condim 1) contact has the normal row only
+            f = np.where(k < dim, data.efc_force[adr[:, None] + np.minimum(k, dim - 1)], 0.0)
+        else:
+            f = np.empty((len(idx), 3))
+            for k, i in enumerate(idx):
+                mujoco.mj_contactForce(self.model, data, int(i), self._f6)
+                f[k] = self._f6[:3]
+        sign = np.where(on2[idx], 1.0, -1.0)
+        return np.einsum("n,nk,nkj->j", sign, f, con.frame[idx].reshape(-1, 3, 3))
 
 
 def contact_force_on(model: mujoco.MjModel, data: mujoco.MjData, geoms: Collection[int],

@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 
 from sim import names
+from sim.contact import ContactForceProbe
 from sim.recording import PhaseSegment, Recording, RecordingMeta, SignalRecorder, write_recording
 from tasks.cell_runtime import CellRuntime
 
@@ -83,10 +84,9 @@ class EpisodeRecorder:
         self._fingers = tuple(int(a) for a in rt.gripper.finger_qpos)
         base = rt.stewart.base_body  # welded to the world: its frame is read once
         self._base_rt, self._base_pos = d.xmat[base].reshape(3, 3).T.copy(), d.xpos[base].copy()
-        side = np.zeros(m.ngeom + 1, np.int8)  # 1: baseplate geom, 2: conductor geom (index -1: none)
-        side[:-1][m.geom_bodyid == m.body(names.PLATE + "baseplate").id] = 1
-        side[:-1][np.isin(m.geom_bodyid, [b for b in range(m.nbody) if m.body(b).name.startswith("conductor")])] = 2
-        self._side = side
+        plate = np.flatnonzero(m.geom_bodyid == m.body(names.PLATE + "baseplate").id)
+        parts = np.flatnonzero(np.isin(m.geom_bodyid, rt.scene.conductor_bodies))
+        self._plate_load = ContactForceProbe(m, plate, parts)  # on the plate, from the conductors
         self._t_prev, self._offset, self._last = rt.time, 0.0, -np.inf
         self._phase_names: list[str] = []
         self._phase_starts: list[float] = []
@@ -129,7 +129,7 @@ class EpisodeRecorder:
             self._poses.sample(rt.scene.data, rt.time + self._offset)
 
     def _sample_plant(self) -> None:
-        m, d, p, base = self.rt.scene.model, self.rt.scene.data, self._plant, PL.start
+        d, p, base = self.rt.scene.data, self._plant, PL.start
         p[0:6] = d.ctrl[self._legs]
         p[6:12] = d.qpos[self._leg_qpos]
         p[0:12] += self._l_min
@@ -138,27 +138,7 @@ class EpisodeRecorder:
         mujoco.mju_mat2Quat(self._quat, (rbt @ d.site_xmat[site].reshape(3, 3)).ravel())
         p[_I["platform_qw"] - base:_I["platform_qz"] - base + 1] = self._quat
         p[_I["gripper_width"] - base] = d.qpos[self._fingers[0]] + d.qpos[self._fingers[1]]
-        p[-3:] = self._contact_force(m, d)
-
-    def _contact_force(self, m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
-        if d.ncon == 0:
-            return np.zeros(3)
-        con = d.contact
-        code = self._side[con.geom] @ np.array([3, 1], np.int8)  # 7: plate is geom2, 5: plate is geom1
-        idx = np.flatnonzero((code == 7) | (code == 5))
-        adr = con.efc_address[idx]
-        idx, adr = idx[adr >= 0], adr[adr >= 0]
-        if not len(idx):
-            return np.zeros(3)
-        if m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC:  # efc_force is the force in the contact frame
-            f = d.efc_force[adr[:, None] + np.arange(3)]
-        else:
-            f, f6 = np.empty((len(idx), 3)), np.empty(6)
-            for k, i in enumerate(idx):
-                mujoco.mj_contactForce(m, d, i, f6)
-                f[k] = f6[:3]
-        sign = np.where(code[idx] == 7, 1.0, -1.0)  # the force acts on geom2 along the frame normal
-        return np.einsum("n,nk,nkj->j", sign, f, con.frame[idx].reshape(-1, 3, 3))
+        p[-3:] = self._plate_load.force(d)
 
     # --- rare events ---------------------------------------------------------------------
     def frames(self, frames: dict[str, np.ndarray]) -> None:
