@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
 from controllers.arm_controller import ControlLaw
@@ -50,6 +51,9 @@ STATION_ENTRY = np.array([0.60, 0.0, 0.299])
 PLATFORM_SETTLE_S = 0.4
 """Hold after a platform ramp: the leg PIDs settle to ~1 um."""
 UP = np.array([0.0, 0.0, 1.0])
+FOLLOW_DEADBAND = 2e-6
+"""Sideways TCP wander below which the platform is not re-commanded [m] (encoder resolution
+at the TCP is ~3 um)."""
 
 
 @dataclass(frozen=True)
@@ -63,6 +67,35 @@ class CycleResult:
     insertion_time_s: float = float("nan")
     depth_shortfall_mm: float = float("nan")
     clearance_um: float = float("nan")
+
+
+class HoleUnderJournal:
+    """Keeps the hole under the held journal during the guarded approach (Stewart path).
+
+    The arm's dry joint friction lets the TCP wander sideways by ~0.1 mm as it moves down from
+    the hover; its encoders see the wander (the measured TCP), and the platform shifts the hole
+    with it, at FOLLOW_HZ. Only the sideways part is followed: the approach itself stays the
+    arm's."""
+
+    def __init__(self, plate: PlateCommander, data: mujoco.MjData, hole_in_plate: np.ndarray,
+                 axis_in_plate: np.ndarray, entry: np.ndarray, axis: np.ndarray, start: np.ndarray,
+                 every: int = 10) -> None:
+        self.plate, self.data, self.every = plate, data, every
+        self.hole_in_plate, self.axis_in_plate = hole_in_plate, axis_in_plate
+        self.entry, self.axis, self.start = entry, axis, np.asarray(start, float).copy()
+        self.shift, self.calls = np.zeros(3), 0
+
+    def __call__(self, tcp: np.ndarray) -> None:
+        self.calls += 1
+        if self.calls % self.every:
+            return
+        shift = tcp - self.start
+        shift -= (shift @ self.axis) * self.axis
+        if np.linalg.norm(shift - self.shift) < FOLLOW_DEADBAND:
+            return
+        self.shift = shift
+        goal = self.plate.goal_for(self.hole_in_plate, self.axis_in_plate, self.entry + shift, -self.axis)
+        self.plate.nudge(self.data, goal)
 
 
 class CycleFailure(Exception):
@@ -192,16 +225,19 @@ class HoleCycle:
             ramp = self.plate.move_to(d, goal, rt.time)
             rt.run(ramp + PLATFORM_SETTLE_S)
             seat, approach = pos + HOVER * axis, axis
+            follow = HoleUnderJournal(self.plate, d, self.holes_in_plate[self.hole], self.axis_in_plate,
+                                      entry, axis, pos)
         else:
             h = plate.holes[self.hole]
             seat = seat_tcp(h.centre, HAND_DOWN, held, lj)
             travel(rt, seat + HOVER * h.axis, HAND_DOWN)
             approach = -h.axis
+            follow = None
 
         self._enter("insert")
         rt.arm.tare()
         cfg = InsertionConfig(damage_force_n=self.cfg.damage_force_n, time_limit_s=self.cfg.hole_time_limit_s)
-        result = insert(rt, seat, HAND_DOWN, approach, self.law, self.conductor, self.hole, cfg)
+        result = insert(rt, seat, HAND_DOWN, approach, self.law, self.conductor, self.hole, cfg, follow)
         self._enter("release")
         release(rt, body)
         diam = rt.scene.diameters

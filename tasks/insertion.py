@@ -10,6 +10,7 @@ hole entry, the true peak contact force, and the lateral misalignment at first c
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -114,9 +115,13 @@ class _Truth:
 
 def insert(rt: CellRuntime, seat_tcp: np.ndarray, rot: np.ndarray, axis: np.ndarray,
            law: ControlLaw, conductor: int, hole: int,
-           config: InsertionConfig = InsertionConfig()) -> InsertionResult:
+           config: InsertionConfig = InsertionConfig(),
+           follow: Callable[[np.ndarray], None] | None = None) -> InsertionResult:
     """Insert from the current hover: `seat_tcp` is where the TCP would be with the part
-    seated (as vision and the in-hand measurement predict), `axis` the insertion direction."""
+    seated (as vision and the in-hand measurement predict), `axis` the insertion direction.
+
+    `follow`, if given, gets the measured TCP position every control period of the guarded
+    approach, until contact (the Stewart path keeps the hole under the journal with it)."""
     if law is ControlLaw.JOINT_PD:
         raise ConfigError("insertion law: force_position or impedance")
     axis = np.asarray(axis, float) / np.linalg.norm(axis)
@@ -126,13 +131,14 @@ def insert(rt: CellRuntime, seat_tcp: np.ndarray, rot: np.ndarray, axis: np.ndar
     goal = np.asarray(seat_tcp, float) + config.overtravel * axis
     rt.substep_probe = truth.accumulate
     try:
-        return _push(rt, truth, start, goal, rot, axis, law, config)
+        return _push(rt, truth, start, goal, rot, axis, law, config, follow)
     finally:
         rt.substep_probe = None
 
 
 def _push(rt: CellRuntime, truth: _Truth, start: np.ndarray, goal: np.ndarray, rot: np.ndarray,
-          axis: np.ndarray, law: ControlLaw, config: InsertionConfig) -> InsertionResult:
+          axis: np.ndarray, law: ControlLaw, config: InsertionConfig,
+          follow: Callable[[np.ndarray], None] | None) -> InsertionResult:
     t0, peak, lateral, t_contact = rt.time, 0.0, float("nan"), None
     held: CartesianTarget | None = None
     window: deque[float] = deque(maxlen=round(config.stall_s / rt.dt) + 1)
@@ -146,6 +152,8 @@ def _push(rt: CellRuntime, truth: _Truth, start: np.ndarray, goal: np.ndarray, r
             if rt.arm.measured_push() > config.contact_n:
                 pos, _ = rt.arm.nominal.tcp_pose()
                 held = CartesianTarget(pos.copy(), rot)
+            elif follow is not None:
+                follow(rt.arm.nominal.tcp_pose()[0])
         if held is not None:
             rt.arm.track(held, law, ForceTarget(axis, config.force_n))
         rt.step()

@@ -140,10 +140,19 @@ class PlateCommander:
         tau = min(1.0, (now - t0) / duration)
         s = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
         pose = transform(_slerp(start[:3, :3], goal[:3, :3], s), start[:3, 3] + s * (goal[:3, 3] - start[:3, 3]))
-        self.servo.command_strokes(data, self.strokes(pose))
-        self.commanded = pose
+        self._command(data, pose)
         if tau >= 1.0:
             self._ramp = None
+
+    def nudge(self, data: mujoco.MjData, goal: np.ndarray) -> None:
+        """Command `goal` at once, ending any ramp: for corrections of a few micrometres, which
+        the leg servos follow within milliseconds."""
+        self._ramp = None
+        self._command(data, goal)
+
+    def _command(self, data: mujoco.MjData, pose: np.ndarray) -> None:
+        self.servo.command_strokes(data, self.strokes(pose))
+        self.commanded = pose
 
     def reset_to(self, commanded: np.ndarray) -> None:
         """Forget any ramp and take `commanded` as the pose in force (after a state restore)."""

@@ -1,7 +1,8 @@
 """The paper's argument as a seeded, CI-sized regression (issue 5): on seed 0's two far corner
 holes, the serial robot alone misses (its friction-limited arm stops 0.3-0.4 mm off the hole),
 while the Stewart correction through the model identified by a simulated motion-capture
-campaign fills both with direct force-position control (the nominal model misses hole 35 by
+campaign fills both with direct force-position control, the platform keeping the hole under
+the journal as the arm's encoders see it wander on the way down (the nominal model misses hole 35 by
 0.36 mm: measured, not asserted here, to keep the suite short).
 
 The camera calibration is the session fixtures' (conftest); the Stewart campaign (60 poses,
@@ -71,9 +72,14 @@ def test_calibrated_stewart_correction_fills_the_near_corner_and_beats_the_arm(s
         assert corrected.lateral_misalignment_mm < 0.6 * arm_alone.lateral_misalignment_mm
 
 
-@pytest.mark.xfail(strict=True, reason="issue 5 shortfall: the calibrated model brings hole 35 only "
-                   "to ~0.20 mm off axis (the identified model's own error for this move is "
-                   "0.03-0.08 mm; the rest is not yet explained), at the edge of the ~0.21 mm capture")
 def test_calibrated_force_position_fills_every_hole(calibrated):
     assert all(r.outcome == Outcome.SUCCESS.value for r in calibrated), [r.reason for r in calibrated]
+    assert all(r.peak_force_n < 20.0 and r.depth_shortfall_mm < 0.02 for r in calibrated)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 5 shortfall: hole 35 is met ~0.12 mm off axis. Measured "
+                   "budget: the part slides ~50 um in the pads between the in-hand inspection and "
+                   "the hover (MuJoCo's regularised pad friction; test_grasp), the identified model "
+                   "misplaces the hole by 30-60 um")
+def test_calibrated_meets_every_hole_within_a_tenth(calibrated):
     assert max(r.lateral_misalignment_mm for r in calibrated) < 0.1
