@@ -110,6 +110,11 @@ PLANE_TOL = 1e-3
 (the plate is flat to microns; a wrong stereo match lands millimetres off it)."""
 
 
+STRAY_LINE_MAX = 1
+"""Most detections an outer lattice line beyond the design span may hold to be dropped as
+false (a real row of 6 holes shows at least 4 with up to 2 hidden or missed)."""
+
+
 def _on_plane(points: Vec, up: Vec) -> tuple[NDArray[np.bool_], Vec]:
     """Inliers of the plane through `points` (refitted without the far ones) and its normal."""
     keep = np.ones(len(points), bool)
@@ -144,6 +149,7 @@ def _assign_grid(points: Vec, plate: BaseplateConfig, rot0: Vec) -> NDArray[np.i
     keep = off <= 0.25
     if keep.sum() < 3:
         raise PlateNotFound("the matched holes do not form a grid of the design pitch")
+    keep &= ~_stray_lines(ij, keep, (plate.cols, plate.rows))
     lo, span = ij[keep].min(axis=0), ij[keep].max(axis=0) - ij[keep].min(axis=0) + 1
     if span[0] != plate.cols or span[1] != plate.rows:
         raise PlateNotFound(f"hole grid incomplete or ambiguous: seen {span[0]} x {span[1]} "
@@ -154,6 +160,25 @@ def _assign_grid(points: Vec, plate: BaseplateConfig, rot0: Vec) -> NDArray[np.i
         idx = np.flatnonzero(k == dup)
         k[idx[np.argsort(off[idx])[1:]]] = -1
     return k
+
+
+def _stray_lines(ij: NDArray[np.int_], keep: NDArray[np.bool_], design: tuple[int, int]) -> NDArray[np.bool_]:
+    """Detections on outer lattice lines beyond the design's span that hold at most
+    STRAY_LINE_MAX of them: a false match on the plate plane just off the grid (seen: a dark
+    feature beside a moved plate's corner) would otherwise widen the grid by a line."""
+    stray = np.zeros(len(ij), bool)
+    for axis, size in enumerate(design):
+        while True:
+            ok = keep & ~stray
+            lo, hi = ij[ok, axis].min(), ij[ok, axis].max()
+            if hi - lo + 1 <= size:
+                break
+            counts = {end: int(np.sum(ok & (ij[:, axis] == end))) for end in (lo, hi)}
+            end = min(counts, key=counts.get)
+            if counts[end] > STRAY_LINE_MAX:
+                break  # a real line of holes: leave the span error to the caller
+            stray |= ok & (ij[:, axis] == end)
+    return stray
 
 
 def _kabsch(model: Vec, measured: Vec) -> tuple[Vec, Vec]:
