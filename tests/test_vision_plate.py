@@ -159,17 +159,17 @@ def test_a_stray_match_off_the_grid_corner_is_dropped_not_a_new_row():
     """Seen in an episode (seed 0, cycle 3, calibrated): one false match on the plate plane
     1.2 pitches beyond a corner widened the grid to 7 x 7 and the cycle ended vision_miss."""
     from sim.baseplate import BaseplateConfig
-    from vision.plate import _assign_grid
+    from vision.plate_grid import assign_grid
 
     points = _grid_points(np.array([[6.2, -0.9, 0.0]]))
-    k = _assign_grid(points, BaseplateConfig(), np.eye(3))
+    k = assign_grid(points, BaseplateConfig(), np.eye(3))
     assert k[-1] == -1 and sorted(k[:-1]) == list(range(36))
 
 
 def test_a_real_extra_row_still_fails():
     from sim.baseplate import BaseplateConfig
-    from vision.plate import _assign_grid
+    from vision.plate_grid import assign_grid
 
     row = np.c_[np.arange(6), np.full(6, 6.0), np.zeros(6)]
     with pytest.raises(PlateNotFound, match="7"):
-        _assign_grid(_grid_points(row), BaseplateConfig(), np.eye(3))
+        assign_grid(_grid_points(row), BaseplateConfig(), np.eye(3))
