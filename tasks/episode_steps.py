@@ -74,8 +74,8 @@ class HoleUnderJournal:
 
     The arm's dry joint friction lets the TCP wander sideways by ~0.1 mm as it moves down from
     the hover; its encoders see the wander (the measured TCP), and the platform shifts the hole
-    with it, at FOLLOW_HZ. Only the sideways part is followed: the approach itself stays the
-    arm's."""
+    with it every `every` control periods (10: 100 Hz). Only the sideways part is followed:
+    the approach itself stays the arm's."""
 
     def __init__(self, plate: PlateCommander, data: mujoco.MjData, hole_in_plate: np.ndarray,
                  axis_in_plate: np.ndarray, entry: np.ndarray, axis: np.ndarray, start: np.ndarray,
