@@ -20,6 +20,7 @@ from scipy.optimize import least_squares
 
 from controllers.stewart_kinematics import StewartGeometry
 from identify.errors import IdentificationError
+from sim.stewart import MAX_JOINT_ERROR
 
 N_LEGS = 6
 PARAMS_PER_LEG = 7
@@ -89,20 +90,34 @@ def identification_jacobian(errors: np.ndarray, nominal: StewartGeometry,
 
 def identify_lm(nominal: StewartGeometry, meas: StewartMeasurements,
                 initial: np.ndarray | None = None) -> StewartIdentification:
-    """Levenberg-Marquardt (scipy `least_squares(method='lm')`) with the analytic Jacobian.
-    IdentificationError if the pose set leaves a parameter combination unidentifiable."""
+    """Levenberg-Marquardt (scipy `least_squares(method='lm')`) with the analytic Jacobian; if
+    noise pushes a parameter past the model's +-MAX_JOINT_ERROR, the bounded trust-region
+    solve instead. IdentificationError if the pose set leaves a combination unidentifiable."""
     x0 = np.zeros(N_PARAMS) if initial is None else np.asarray(initial, float).ravel()
-    sv = scaled_singular_values(identification_jacobian(x0, nominal, meas))
+    require_identifiable(identification_jacobian(x0, nominal, meas))
+    def fun(x: np.ndarray) -> np.ndarray:
+        return leg_residuals(x, nominal, meas).ravel()
+
+    def jac(x: np.ndarray) -> np.ndarray:
+        return identification_jacobian(x, nominal, meas)
+
+    sol = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    if np.max(np.abs(sol.x)) > MAX_JOINT_ERROR:
+        # Noise drove a weakly identifiable combination past what the platform model accepts:
+        # solve again within the model's range (the parameters' physical prior).
+        sol = least_squares(fun, np.clip(x0, -MAX_JOINT_ERROR, MAX_JOINT_ERROR), jac=jac, method="trf",
+                            bounds=(-MAX_JOINT_ERROR, MAX_JOINT_ERROR), xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    return StewartIdentification(sol.x.reshape(N_LEGS, PARAMS_PER_LEG),
+                                 float(np.sqrt(np.mean(sol.fun**2))), scaled_singular_values(jac(sol.x)), int(sol.nfev))
+
+
+def require_identifiable(jac: np.ndarray) -> None:
+    """IdentificationError when the pose set leaves a parameter combination unidentifiable."""
+    sv = scaled_singular_values(jac)
     if sv[-1] < RANK_TOL * sv[0]:
         raise IdentificationError(f"the pose set is rank deficient: {int(np.sum(sv < RANK_TOL * sv[0]))} "
                                   "parameter combination(s) cannot be identified; add poses with "
                                   "more rotation and translation spread")
-    sol = least_squares(lambda x: leg_residuals(x, nominal, meas).ravel(), x0,
-                        jac=lambda x: identification_jacobian(x, nominal, meas),
-                        method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    jac = identification_jacobian(sol.x, nominal, meas)
-    return StewartIdentification(sol.x.reshape(N_LEGS, PARAMS_PER_LEG),
-                                 float(np.sqrt(np.mean(sol.fun**2))), scaled_singular_values(jac), int(sol.nfev))
 
 
 def scaled_singular_values(jac: np.ndarray) -> np.ndarray:

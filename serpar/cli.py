@@ -111,7 +111,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="serpar", description=__doc__.split("\n")[0] if __doc__ else None)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser,
-                                metavar="{info,render,validate,control-check,workspace,vision-check,bench,run,ablate,replay}")
+                                metavar="{info,render,validate,control-check,workspace,vision-check,bench,run,ablate,replay,calibrate,error-analysis}")
 
     def scene_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--seed", type=int, help="seed of the tolerance draws (integer; default 0)")
@@ -146,7 +146,9 @@ def build_parser() -> argparse.ArgumentParser:
     from serpar import (
         cmd_ablate,
         cmd_bench,
+        cmd_calibrate,
         cmd_control_check,
+        cmd_error_analysis,
         cmd_replay,
         cmd_run,
         cmd_vision_check,
@@ -160,6 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
     cmd_vision_check.register(sub)
     cmd_bench.register(sub)
     cmd_replay.register(sub)
+    cmd_calibrate.register(sub)
+    cmd_error_analysis.register(sub)
     return parser
 
 

@@ -31,9 +31,11 @@ def _fmt_rate(s) -> str:
 def cmd_ablate(args: argparse.Namespace) -> int:
     from serpar.cmd_run import check_ray
     from sim.errors import ConfigError
-    from tasks.ablation import ablation_arms, run_ablation, stewart_calibration_file
+    from tasks.ablation import ablation_arms, run_ablation
     from tasks.camera_cache import calibrated_pairs
     from tasks.episode_config import EpisodeConfig
+    from tasks.run_episodes import episode_configs
+    from tasks.stewart_model import prepare_models
 
     if args.workers is None:
         args.workers = 1 if args.ray else 2
@@ -45,7 +47,8 @@ def cmd_ablate(args: argparse.Namespace) -> int:
         print(message, file=sys.stderr)
 
     calibrated_pairs(base.camera_width, log=log)
-    arms = ablation_arms(base, stewart_calibration_file(base, log))
+    arms = ablation_arms(base)
+    prepare_models([cfg for arm in arms for cfg in episode_configs(arm.config, args.episodes)], log)
     bar = progress(len(arms) * args.episodes * args.holes, "holes", enabled=sys.stderr.isatty())
 
     def on_hole(r: dict) -> None:

@@ -43,10 +43,10 @@ def episode_config(args: argparse.Namespace):
         cfg = dataclasses.replace(cfg, holes=args.holes)
     if args.seed is not None:
         cfg = dataclasses.replace(cfg, seed=args.seed)
-    if cfg.stewart_calibration is not None:  # a bad file fails now, not in every episode
+    if cfg.calibration_file is not None:  # a bad file fails now, not in every episode
         from tasks.stewart_params import load_stewart_parameters
 
-        load_stewart_parameters(cfg.stewart_calibration)
+        load_stewart_parameters(cfg.calibration_file)
     if args.episodes < 1:
         raise ConfigError(f"--episodes {args.episodes}: must be >= 1")
     if args.workers < 1:
@@ -112,11 +112,16 @@ def _print_recordings(root: str, seeds: list[int]) -> None:
 def cmd_run(args: argparse.Namespace) -> int:
     from tasks.camera_cache import calibrated_pairs
     from tasks.run_episodes import episode_configs, run_many, summarise
+    from tasks.stewart_model import prepare_models
 
     cfg = episode_config(args)
     configs = episode_configs(cfg, args.episodes)
     n_holes = cfg.holes if isinstance(cfg.holes, int) else len(cfg.holes)
-    calibrated_pairs(cfg.camera_width, log=lambda m: print(m, file=sys.stderr))  # once, before workers
+    def log(message: str) -> None:
+        print(message, file=sys.stderr)
+
+    calibrated_pairs(cfg.camera_width, log=log)  # once, before workers
+    prepare_models(configs, log)  # the Stewart campaign too
     bar = progress(n_holes * len(configs), "holes", enabled=sys.stderr.isatty())
 
     def on_hole(record: dict) -> None:

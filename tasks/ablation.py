@@ -10,25 +10,13 @@ in the configuration.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import json
 import math
 import statistics
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
-from tasks.camera_cache import cache_dir
-from tasks.episode import scene_config
 from tasks.episode_config import EpisodeConfig
 from tasks.run_episodes import Record, RunSummary, episode_configs, run_many, summarise
-from tasks.stewart_campaign import N_POSES, MocapNoise, calibrate
-from tasks.stewart_params import save_stewart_parameters
-
-CALIBRATION_VERSION = 2
-"""Bump when the Stewart campaign, solver or the simulated cell changes (invalidates cached
-parameter files). 2: wedge bores (lighter plate) and the commander starting from its model's
-reading of the legs in force."""
 
 
 @dataclass(frozen=True)
@@ -37,28 +25,10 @@ class AblationArm:
     config: EpisodeConfig
 
 
-def stewart_calibration_file(cfg: EpisodeConfig, log: Callable[[str], None] | None = None) -> Path:
-    """Identified parameters of the episode's platform (its hidden errors), from a simulated
-    motion-capture campaign with the default noise; cached on disk like the camera calibration."""
-    hidden = cfg.hidden_errors.draw(cfg.seed)
-    noise = MocapNoise()
-    key = hashlib.sha256(json.dumps([CALIBRATION_VERSION, hidden.round(12).tolist(), N_POSES,
-                                     dataclasses.asdict(noise)]).encode()).hexdigest()[:16]
-    path = cache_dir() / f"stewart_parameters_{key}.json"
-    if not path.exists():
-        if log:
-            log(f"calibrating the Stewart platform ({N_POSES} poses, mocap noise "
-                f"{noise.position_m * 1e3:g} mm / {noise.angle_deg:g} deg; cached in {path.parent})")
-        result = calibrate(scene_config(cfg), N_POSES, noise, seed=cfg.seed)
-        save_stewart_parameters(path, result.errors, {"residual_rms_m": result.residual_rms_m,
-                                                      "poses": N_POSES, "noise": dataclasses.asdict(noise)})
-    return path
-
-
-def ablation_arms(base: EpisodeConfig, calibration: Path) -> list[AblationArm]:
-    stewart = dataclasses.replace(base, stewart_correction=True, stewart_calibration=None,
+def ablation_arms(base: EpisodeConfig) -> list[AblationArm]:
+    stewart = dataclasses.replace(base, stewart_correction=True, stewart_calibration="none",
                                   controller="force_position")
-    calibrated = dataclasses.replace(stewart, stewart_calibration=str(calibration))
+    calibrated = dataclasses.replace(stewart, stewart_calibration="campaign")
     return [
         AblationArm("serial robot alone", dataclasses.replace(stewart, stewart_correction=False)),
         AblationArm("Stewart, uncalibrated model", stewart),

@@ -19,16 +19,14 @@ import mujoco
 import numpy as np
 
 from controllers.arm_controller import ControlLaw
-from sim.arm import PANDA_COULOMB_FRICTION
 from sim.errors import SimError, UnstableSimulation
-from sim.scene import Scene, SceneConfig, build_scene
-from sim.stewart import StewartConfig
+from sim.scene import Scene, build_scene
 from tasks.arm_checks import controller_config
 from tasks.cell_runtime import CellRuntime
-from tasks.episode_config import EpisodeConfig, Outcome
+from tasks.episode_config import EpisodeConfig, Outcome, scene_config
 from tasks.episode_steps import CycleFailure, HoleCycle
 from tasks.stewart_correction import PlateCommander
-from tasks.stewart_params import load_stewart_parameters
+from tasks.stewart_model import believed_errors
 from vision.camera import StereoPair
 from vision.imaging import Camera, ImagingConfig
 
@@ -76,23 +74,10 @@ class EpisodeSummary:
         return {"kind": "episode", **dataclasses.asdict(self)}
 
 
-def scene_config(cfg: EpisodeConfig) -> SceneConfig:
-    """The cell of an episode: its seed's tolerance draw, the hidden Stewart errors and the
-    arm's joint friction."""
-    friction = tuple(cfg.arm_friction * f for f in PANDA_COULOMB_FRICTION) if cfg.arm_friction else ()
-    return SceneConfig(seed=cfg.seed, tolerance_distribution=cfg.tolerance_distribution,
-                       stewart=StewartConfig(joint_errors=cfg.hidden_errors.draw(cfg.seed)),
-                       arm_joint_friction=friction)
-
-
-def _believed_errors(cfg: EpisodeConfig) -> np.ndarray | None:
-    return None if cfg.stewart_calibration is None else load_stewart_parameters(cfg.stewart_calibration)
-
-
 def build_runtime(cfg: EpisodeConfig) -> tuple[CellRuntime, PlateCommander]:
     scene: Scene = build_scene(scene_config(cfg))
     rt = CellRuntime.create(scene, controller_config(cfg.sensor_noise), seed=cfg.seed)
-    plate = PlateCommander.create(scene.model, scene.data, scene.config.stewart, _believed_errors(cfg))
+    plate = PlateCommander.create(scene.model, scene.data, scene.config.stewart, believed_errors(cfg))
     rt.observers.append(lambda r: plate.update(r.scene.data, r.time))
     return rt, plate
 

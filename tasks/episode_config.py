@@ -11,11 +11,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from assets import asset_path
+from sim.arm import PANDA_COULOMB_FRICTION
 from sim.errors import ConfigError
+from sim.scene import SceneConfig
+from sim.stewart import StewartConfig
 from sim.tolerances import DISTRIBUTIONS
 
 CONTROLLERS = ("force_position", "impedance")
 ERROR_MODES = ("table5", "random", "none")
+CALIBRATIONS = ("campaign", "none")
 CAMERA_WIDTHS = (2048, 1024)
 N_HOLES = 36
 
@@ -73,8 +77,11 @@ class EpisodeConfig:
     controller: str = "force_position"
     stewart_correction: bool = True
     """Step 5 on; off = the serial robot alone."""
-    stewart_calibration: str | None = None
-    """Identified Stewart parameters (a `serpar calibrate stewart --out` file); None = nominal model."""
+    stewart_calibration: str = "campaign"
+    """The platform's model of itself in step 5: 'campaign' = identified from a simulated
+    motion-capture campaign in this cell (seed 000 §4.2; run once, then cached), 'none' = the
+    nominal model (uncalibrated), or the path of an identified-parameters file
+    (`tasks.stewart_params`)."""
     hidden_errors: HiddenStewartErrors = field(default_factory=HiddenStewartErrors)
     arm_friction: float = 0.3
     """Dry joint friction of the simulated arm as a fraction of a real Panda's
@@ -107,8 +114,25 @@ class EpisodeConfig:
             raise ConfigError(f"camera_width {self.camera_width}; valid: {', '.join(map(str, CAMERA_WIDTHS))}")
         if not 1 <= self.damage_force_n <= 200 or not 0.5 <= self.hole_time_limit_s <= 120:
             raise ConfigError("damage_force_n in 1..200 N, hole_time_limit_s in 0.5..120 s")
-        if self.stewart_calibration is not None and not self.stewart_correction:
-            raise ConfigError("stewart_calibration is given but stewart_correction is off: it would be unused")
+        if not isinstance(self.stewart_calibration, str) or not self.stewart_calibration:
+            raise ConfigError(f"stewart_calibration {self.stewart_calibration!r}; valid: "
+                              f"{', '.join(CALIBRATIONS)} or the path of a parameters file")
+        if self.calibration_file is not None and not self.stewart_correction:
+            raise ConfigError("stewart_calibration is a file but stewart_correction is off: it would be unused")
+
+    @property
+    def calibration_file(self) -> str | None:
+        """The parameters file named by stewart_calibration, None for 'campaign' or 'none'."""
+        return None if self.stewart_calibration in CALIBRATIONS else self.stewart_calibration
+
+
+def scene_config(cfg: EpisodeConfig) -> SceneConfig:
+    """The cell of an episode: its seed's tolerance draw, the hidden Stewart errors and the
+    arm's joint friction."""
+    friction = tuple(cfg.arm_friction * f for f in PANDA_COULOMB_FRICTION) if cfg.arm_friction else ()
+    return SceneConfig(seed=cfg.seed, tolerance_distribution=cfg.tolerance_distribution,
+                       stewart=StewartConfig(joint_errors=cfg.hidden_errors.draw(cfg.seed)),
+                       arm_joint_friction=friction)
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:

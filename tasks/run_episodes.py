@@ -57,10 +57,9 @@ def run_one(cfg: EpisodeConfig, on_hole: Callable[[Record], None] | None = None,
             on_hole(records[-1])
 
     try:
-        if cfg.stewart_calibration is not None:  # a bad file fails here, before any camera calibration
-            from tasks.stewart_params import load_stewart_parameters
+        from tasks.stewart_model import prepare_models
 
-            load_stewart_parameters(cfg.stewart_calibration)
+        prepare_models([cfg])  # a bad parameters file fails here, before any camera calibration
         folder = None if record_dir is None else recording_folder(record_dir, cfg.seed, label)
         summary = run_episode(cfg, calibrated_pairs(cfg.camera_width), on_record=keep, recording=folder)
         records.append({**summary.as_dict(), **tag})

@@ -69,21 +69,38 @@ def measure(scene_cfg: SceneConfig, pos: np.ndarray, rot: np.ndarray, believed: 
             noise: MocapNoise = MocapNoise(), seed: int = 0) -> StewartMeasurements:
     """Drive the simulated platform (with its hidden errors) through the poses using the model
     with `believed` errors (None = nominal); returns commanded strokes and mocap poses."""
+    return measure_with_truth(scene_cfg, pos, rot, believed, noise, seed)[0]
+
+
+def measure_with_truth(scene_cfg: SceneConfig, pos: np.ndarray, rot: np.ndarray,
+                       believed: np.ndarray | None = None, noise: MocapNoise = MocapNoise(),
+                       seed: int = 0) -> tuple[StewartMeasurements, np.ndarray, np.ndarray]:
+    """:func:`measure`, and the simulator's true poses (pos (N, 3), rot (N, 3, 3)) for scoring."""
     scene = build_scene(dataclasses.replace(scene_cfg, n_conductors=0))
     rt = CellRuntime.create(scene, controller_config(noise=False), seed=seed)
     plate = PlateCommander.create(scene.model, scene.data, scene_cfg.stewart, believed)
     rt.observers.append(lambda r: plate.update(r.scene.data, r.time))
     rng = np.random.default_rng(seed + 7919)
-    strokes, mpos, mrot = [], [], []
+    strokes, tpos, trot = [], [], []
     for p, r in zip(pos, rot):
         require_pose(plate.geometry, p, r)
         goal = transform(r, p)
         rt.run(plate.move_to(scene.data, goal, rt.time, CAMPAIGN_SPEED) + SETTLE_S)
         true_pos, true_rot = platform_pose(scene.model, scene.data, names.STEWART)
         strokes.append(plate.strokes(goal))
-        mpos.append(true_pos + noise.position_m * rng.standard_normal(3))
-        mrot.append(so3_exp(np.radians(noise.angle_deg) * rng.standard_normal(3)) @ true_rot)
-    return StewartMeasurements(np.array(strokes), np.array(mpos), np.array(mrot))
+        tpos.append(true_pos)
+        trot.append(true_rot)
+    return mocap(np.array(strokes), np.array(tpos), np.array(trot), noise, rng), np.array(tpos), np.array(trot)
+
+
+def mocap(strokes: np.ndarray, true_pos: np.ndarray, true_rot: np.ndarray, noise: MocapNoise,
+          rng: np.random.Generator) -> StewartMeasurements:
+    """What motion capture reports of the true poses: each pose with independent noise."""
+    mpos, mrot = [], []
+    for p, r in zip(true_pos, true_rot):  # per pose, position then angle (the draw order is kept)
+        mpos.append(p + noise.position_m * rng.standard_normal(3))
+        mrot.append(so3_exp(np.radians(noise.angle_deg) * rng.standard_normal(3)) @ r)
+    return StewartMeasurements(strokes, np.array(mpos), np.array(mrot))
 
 
 def calibrate(scene_cfg: SceneConfig, n_poses: int = N_POSES, noise: MocapNoise = MocapNoise(),

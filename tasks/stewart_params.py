@@ -4,6 +4,7 @@ episode's step-5 model reads (the 42 parameters of seed 000: per leg dl, dP xyz,
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +21,10 @@ def save_stewart_parameters(path: str | Path, errors: np.ndarray, info: dict | N
     errors = _checked(np.asarray(errors, float), str(path))
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"format": FORMAT, "version": VERSION, "units": "m", "columns": COLUMNS,
-                               "joint_errors": errors.tolist(), "info": info or {}}, indent=1))
+    partial = out.with_name(f".{out.name}.{os.getpid()}.partial")  # a reader never sees half a file
+    partial.write_text(json.dumps({"format": FORMAT, "version": VERSION, "units": "m", "columns": COLUMNS,
+                                   "joint_errors": errors.tolist(), "info": info or {}}, indent=1))
+    os.replace(partial, out)
     return out
 
 

@@ -11,13 +11,14 @@ The camera calibration is the session fixtures' (conftest); the Stewart campaign
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from tasks.ablation import ablation_arms
-from tasks.episode import run_episode, scene_config
+from tasks.episode import run_episode
 from tasks.episode_config import EpisodeConfig, Outcome
-from tasks.stewart_campaign import N_POSES, MocapNoise, calibrate
-from tasks.stewart_params import save_stewart_parameters
+from tasks.stewart_model import campaign_file
 
 pytestmark = pytest.mark.xdist_group("calibrated")
 
@@ -33,9 +34,14 @@ def pairs(calibrated_top, calibrated_inspect):
 
 @pytest.fixture(scope="module")
 def arms(tmp_path_factory):
-    result = calibrate(scene_config(BASE), N_POSES, MocapNoise(), seed=BASE.seed)
-    path = save_stewart_parameters(tmp_path_factory.mktemp("stewart") / "identified.json", result.errors)
-    return {arm.name: arm.config for arm in ablation_arms(BASE, path)}
+    """The arms, with the calibrated ones' campaign run now into a fresh cache folder."""
+    arms = {arm.name: arm.config for arm in ablation_arms(BASE)}
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("SERPAR_CACHE", str(tmp_path_factory.mktemp("cache")))
+        path = campaign_file(arms["Stewart, calibrated model"])
+    assert path.is_file()
+    return {name: dataclasses.replace(cfg, stewart_calibration=str(path)) if cfg.stewart_calibration == "campaign"
+            else cfg for name, cfg in arms.items()}
 
 
 def _holes(cfg: EpisodeConfig, pairs) -> list:

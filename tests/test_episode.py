@@ -24,7 +24,7 @@ pytestmark = pytest.mark.xdist_group("calibrated")
 def one_hole(calibrated_top, calibrated_inspect):
     pairs = {"top": calibrated_top.calibration.pair, "inspect": calibrated_inspect.calibration.pair}
     records = []
-    summary = run_episode(EpisodeConfig(holes=(14,)), pairs, on_record=records.append)
+    summary = run_episode(EpisodeConfig(holes=(14,), stewart_calibration="none"), pairs, on_record=records.append)
     return summary, records
 
 

@@ -34,6 +34,8 @@ def test_yaml_round_trip_and_unknown_keys(tmp_path):
     ({"holes": (1, 1)}, "distinct indices"),
     ({"camera_width": 640}, "valid: 2048, 1024"),
     ({"stewart_correction": False, "stewart_calibration": "p.json"}, "would be unused"),
+    ({"stewart_calibration": ""}, "valid: campaign, none or the path of a parameters file"),
+    ({"stewart_calibration": None}, "valid: campaign, none or the path of a parameters file"),
 ])
 def test_bad_config_names_the_valid_choices(kwargs, needle):
     with pytest.raises(ConfigError, match=needle):

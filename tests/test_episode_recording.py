@@ -21,7 +21,7 @@ STEP = 2 * np.pi / 2**20
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    cfg = EpisodeConfig()
+    cfg = EpisodeConfig(stewart_calibration="none")
     rt, plate = build_runtime(cfg)
     d = rt.scene.data
     truth: dict[float, np.ndarray] = {rt.time: d.qpos[rt.scene.arm_qpos_adr].copy()}
@@ -160,7 +160,8 @@ def test_run_episode_writes_its_recording_even_when_it_fails(tmp_path, monkeypat
     monkeypatch.setattr(HoleCycle, "register_platform", fail)
     pair = SimpleNamespace(scaled=lambda size: pair)
     with pytest.raises(SimError, match="injected"):
-        run_episode(EpisodeConfig(camera_width=1024), {"top": pair, "inspect": pair}, recording=tmp_path / "ep")
+        run_episode(EpisodeConfig(camera_width=1024, stewart_calibration="none"), {"top": pair, "inspect": pair},
+                    recording=tmp_path / "ep")
     back = read_recording(tmp_path / "ep")
     assert back.signals.num_rows == 300 and [p.name for p in back.meta.phases] == ["start"]
     assert back.meta.model["episode_config"]["camera_width"] == 1024

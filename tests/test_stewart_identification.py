@@ -15,8 +15,7 @@ from identify.stewart_identification import (
     leg_residuals,
 )
 from sim.stewart import StewartConfig, built_geometry
-from tasks.episode import scene_config
-from tasks.episode_config import EpisodeConfig, table5_errors
+from tasks.episode_config import EpisodeConfig, scene_config, table5_errors
 from tasks.stewart_campaign import MocapNoise, measure, random_poses
 
 NOMINAL = StewartConfig().geometry()

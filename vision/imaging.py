@@ -11,6 +11,7 @@ from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
 
+import cv2
 import mujoco
 import numpy as np
 
@@ -73,13 +74,19 @@ def _varied_lights(model: mujoco.MjModel, config: ImagingConfig, rng: np.random.
 
 
 def add_sensor_noise(image: np.ndarray, config: ImagingConfig, rng: np.random.Generator) -> np.ndarray:
-    """Read + shot noise on an 8-bit frame, rounded and clipped like an ADC."""
+    """Read + shot noise on an 8-bit frame, rounded and clipped like an ADC.
+
+    The Gaussian draw is OpenCV's (seeded from `rng`, so a frame is reproducible): a 2048 x 1536
+    RGB frame takes 0.07 s against 0.22 s with numpy's generator, four frames per hole cycle."""
     if config.read_noise == 0 and config.shot_noise_gain == 0:
         return image
-    level = image.astype(np.float32)
-    sigma = np.sqrt(config.read_noise**2 + config.shot_noise_gain * level)
-    noisy = level + sigma * rng.standard_normal(level.shape, dtype=np.float32)
-    return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+    sigma_of_level = np.sqrt(config.read_noise**2 + config.shot_noise_gain * np.arange(256, dtype=np.float32))
+    noise = np.empty(image.shape, np.float32)
+    cv2.setRNGSeed(int(rng.integers(2**31 - 1)))
+    cv2.randn(noise.reshape(image.shape[0], -1), 0.0, 1.0)  # 2-D view: every channel gets noise
+    noise *= sigma_of_level[image]
+    noise += image
+    return np.clip(np.rint(noise, out=noise), 0, 255, out=noise).astype(np.uint8)
 
 
 class Camera:
