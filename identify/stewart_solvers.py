@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,9 +44,7 @@ def pose_error_model(errors: np.ndarray, nominal: StewartGeometry,
     residuals = leg_residuals(errors, nominal, meas)  # (N, 6)
     jc = identification_jacobian(errors, nominal, meas).reshape(len(residuals), N_LEGS, N_PARAMS)
     e = np.asarray(errors, float).reshape(N_LEGS, PARAMS_PER_LEG)
-    model = StewartGeometry(nominal.P + e[:, 1:4], nominal.B + e[:, 4:7], nominal.l_min,
-                            nominal.stroke, nominal.lower_hinge_limit_deg,
-                            nominal.upper_hinge_limit_deg, nominal.home_pos)
+    model = dataclasses.replace(nominal, platform_joints=nominal.P + e[:, 1:4], base_joints=nominal.B + e[:, 4:7])
     jp = jacobian(model, meas.pos, meas.rot)  # (N, 6, 6): leg lengths per pose twist
     dq = np.linalg.solve(jp, residuals[..., None])[..., 0]
     jx = -np.linalg.solve(jp, jc)

@@ -141,14 +141,14 @@ def pose_errors(true_pos: np.ndarray, true_rot: np.ndarray, pos: np.ndarray, rot
     return PoseErrors(true_pos - pos, rotvec)
 
 
-def hidden_errors(cfg: StewartCalibrationConfig, geometry: StewartGeometry, train: Poses) -> np.ndarray:
+def hidden_errors(cfg: StewartCalibrationConfig, stewart: StewartConfig, train: Poses) -> np.ndarray:
     if cfg.errors == "table5":
         return table5_errors()
     if cfg.errors != "seed000":
         return load_stewart_parameters(cfg.errors)
     draw = np.random.default_rng(cfg.seed).uniform(-1.0, 1.0, (6, 7))
-    unit = _kinematic_truth(geometry, 1e-3 * draw, train, None)
-    errs = pose_errors(*unit, *train).max_abs
+    _, unit_pos, unit_rot = _kinematic_truth(stewart, 1e-3 * draw, train, None)
+    errs = pose_errors(unit_pos, unit_rot, *train).max_abs
     scale = 1e-3 / max(errs[:3].max() / SEED000_BOX[0], errs[3:].max() / SEED000_BOX[1])
     if scale * np.abs(draw).max() > MAX_JOINT_ERROR:
         raise ConfigError(f"seed000 errors would need {scale * 1e3:.2f} mm per parameter; limit "
@@ -156,14 +156,15 @@ def hidden_errors(cfg: StewartCalibrationConfig, geometry: StewartGeometry, trai
     return scale * draw
 
 
-def _kinematic_truth(geometry: StewartGeometry, hidden: np.ndarray, poses: Poses,
-                     believed: np.ndarray | None) -> Poses:
-    """Where the built platform stands when the model with `believed` errors commands `poses`."""
-    model, model_dl = built_geometry(StewartConfig(joint_errors=believed))
-    built, dl = built_geometry(StewartConfig(joint_errors=hidden))
+def _kinematic_truth(stewart: StewartConfig, hidden: np.ndarray, poses: Poses,
+                     believed: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The strokes the model with `believed` errors commands for `poses`, and where the platform
+    built with `hidden` errors then stands: (strokes, true pos, true rot)."""
+    model, model_dl = built_geometry(dataclasses.replace(stewart, joint_errors=believed))
+    built, dl = built_geometry(dataclasses.replace(stewart, joint_errors=hidden))
     strokes = inverse_kinematics(model, *poses) - model_dl
     out = [forward_kinematics(built, s + dl, p, r)[:2] for s, p, r in zip(strokes, *poses)]
-    return np.array([o[0] for o in out]), np.array([o[1] for o in out])
+    return strokes, np.array([o[0] for o in out]), np.array([o[1] for o in out])
 
 
 Measure = Callable[[Poses, np.ndarray | None, MocapNoise, int], tuple[StewartMeasurements, np.ndarray, np.ndarray]]
@@ -174,12 +175,9 @@ def measurer(cfg: StewartCalibrationConfig, scene_cfg: SceneConfig, hidden: np.n
     if cfg.source == "cell":
         cell = dataclasses.replace(scene_cfg, stewart=dataclasses.replace(scene_cfg.stewart, joint_errors=hidden))
         return lambda poses, believed, noise, seed: measure_with_truth(cell, *poses, believed, noise, seed)
-    geometry = scene_cfg.stewart.geometry()
 
     def kinematic(poses: Poses, believed: np.ndarray | None, noise: MocapNoise, seed: int):
-        model, model_dl = built_geometry(StewartConfig(joint_errors=believed))
-        true_pos, true_rot = _kinematic_truth(geometry, hidden, poses, believed)
-        strokes = inverse_kinematics(model, *poses) - model_dl
+        strokes, true_pos, true_rot = _kinematic_truth(scene_cfg.stewart, hidden, poses, believed)
         return mocap(strokes, true_pos, true_rot, noise, np.random.default_rng(seed + 7919)), true_pos, true_rot
 
     return kinematic
@@ -200,7 +198,7 @@ def run_calibration(cfg: StewartCalibrationConfig, scene_cfg: SceneConfig | None
     geometry = scene_cfg.stewart.geometry()
     train = training_poses(cfg, geometry)
     verify = random_poses(cfg.verify_poses, cfg.seed + 1, geometry)
-    hidden = hidden_errors(cfg, geometry, train)
+    hidden = hidden_errors(cfg, scene_cfg.stewart, train)
     campaign = measurer(cfg, scene_cfg, hidden)
     stage("measuring the training poses through the nominal model")
     meas, tpos, trot = campaign(train, None, cfg.noise, cfg.seed)
