@@ -23,6 +23,7 @@ from controllers.stewart_kinematics import (
     require_pose,
 )
 from sim.errors import ConfigError, LimitError
+from sim.physics import wake_tree_of
 
 GEOMETRY_MATCH_TOL = 1e-9
 """Model joint sites must equal the geometry's to this [m]: commands assume the same robot."""
@@ -57,6 +58,9 @@ class StewartServo:
     base_body: int
     """Id of the body ``base`` (the Stewart base frame)."""
     hinge_definition: HingeDefinition = "deflection"
+    platform_dof: int = -1
+    """First dof of the platform's free joint: nudged to wake the sleeping platform (-1: the
+    model has sleeping off or the servo was built by hand; nothing to wake)."""
 
     def __post_init__(self) -> None:
         if len(self.actuator_ids) != N_LEGS:
@@ -90,7 +94,8 @@ class StewartServo:
         if abs(hi - geometry.stroke) > GEOMETRY_MATCH_TOL:
             raise ConfigError(f"model leg ctrlrange [0, {hi}] m differs from the geometry's "
                               f"stroke {geometry.stroke} m")
-        return cls(geometry, acts, site, base, hinge_definition)
+        dof = int(model.body_dofadr[model.site_bodyid[site]])
+        return cls(geometry, acts, site, base, hinge_definition, dof)
 
     def command_strokes(self, data: mujoco.MjData, strokes: np.ndarray) -> None:
         """Write six stroke commands [m]; LimitError names any leg outside [0, stroke]."""
@@ -101,7 +106,7 @@ class StewartServo:
                for i, v in enumerate(s) if not 0.0 <= v <= self.geometry.stroke]
         if bad:
             raise LimitError("; ".join(bad))
-        data.ctrl[list(self.actuator_ids)] = s
+        self._write(data, s)
 
     def command_pose(self, data: mujoco.MjData, pos: np.ndarray,
                      rot_or_quat: np.ndarray) -> np.ndarray:
@@ -112,8 +117,14 @@ class StewartServo:
         """
         strokes = require_pose(self.geometry, np.asarray(pos, dtype=float),
                                as_rotation(rot_or_quat), self.hinge_definition)
-        data.ctrl[list(self.actuator_ids)] = strokes
+        self._write(data, strokes)
         return strokes
+
+    def _write(self, data: mujoco.MjData, strokes: np.ndarray) -> None:
+        ids = list(self.actuator_ids)
+        if self.platform_dof >= 0 and np.any(data.ctrl[ids] != strokes):
+            wake_tree_of(data, self.platform_dof)
+        data.ctrl[ids] = strokes
 
     def platform_pose(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """Simulated pose (pos [m], rot) of site platform_centre in the Stewart base frame.

@@ -41,10 +41,15 @@ class PhysicsConfig:
     better, but at 2 steps a light part pressed off-axis onto the plate spins up and blows up."""
     sleep: bool = True
     """MuJoCo island sleeping: parts at rest (conductors in the tray or seated) stop being
-    integrated until something awake touches them. Actuated trees (arm, Stewart) never sleep.
+    integrated until something awake touches them. The arm never sleeps; the Stewart platform
+    sleeps when still (sim.stewart.PLATFORM_SLEEP), and with it the parts seated in its plate.
     36 resting conductors otherwise cost 4x the step time of the empty cell."""
-    sleep_tolerance: float = 1e-4
-    """Velocity below which a tree may fall asleep [m/s or rad/s, MuJoCo's default]."""
+    sleep_tolerance: float = 1e-6
+    """Velocity below which a tree may fall asleep [m/s, rotations weighted by dof_length].
+    Not MuJoCo's default 1e-4: the leg servos converge with a ~70 ms time constant, so at
+    1e-4 the still platform froze 4.3-4.8 um short of a 2 mm move; at 1e-6 it stops within
+    0.05 um. Not lower: seated journals chatter in their bores at 2-8e-7 m/s and would never
+    sleep (measured at 1e-7). Tray parts fall asleep within 0.1 s either way."""
     noslip_iterations: int = 10
     """MuJoCo's no-slip post-solve on friction: without it a soft friction constraint creeps,
     and a held part whose tip lands on the plate top rocks in the soft pads, spins up and
@@ -99,3 +104,16 @@ class PhysicsConfig:
         geom.friction = [self.precision_friction, 0.005, 0.0001]
         geom.condim = 4
         geom.priority = 1
+
+
+WAKE_NUDGE = 1e-30
+"""[m/s]: MuJoCo wakes a sleeping tree whose velocity is not exactly zero (mj_wake); this
+velocity moves nothing in any run's lifetime."""
+
+
+def wake_tree_of(data: mujoco.MjData, dof: int) -> None:
+    """Wake the sleeping island holding `dof` at the next step: a sleeping tree ignores new
+    ctrl. (Writing data.tree_asleep instead breaks MuJoCo's sleep cycles and aborts.)"""
+    if data.qvel[dof] == 0.0:
+        data.qvel[dof] = WAKE_NUDGE
+

@@ -223,6 +223,12 @@ def _leg_frame(direction: np.ndarray) -> np.ndarray:
     return quat
 
 
+PLATFORM_SLEEP = mujoco.mjtSleepPolicy.mjSLEEP_ALLOWED
+"""Actuated trees never sleep by default (mjSLEEP_AUTO), so every part seated in the plate,
+which touches the platform's tree, stayed awake: 6 seated parts made a still cell's step 10x
+dearer. The still platform may sleep; `StewartServo` wakes it whenever a command changes."""
+
+
 def build_stewart_spec(cfg: StewartConfig = StewartConfig(),
                        physics: PhysicsConfig | None = None) -> mujoco.MjSpec:
     """MjSpec of the platform as built (with `cfg.joint_errors`) at the pose the nominal home
@@ -248,6 +254,7 @@ def build_stewart_spec(cfg: StewartConfig = StewartConfig(),
         length = cfg.l_min + dl[i - 1] + s_home[i - 1]
         direction = pos0 + rot0 @ p[i - 1] - b[i - 1]
         cyl = base.add_body(name=f"cyl{i}", pos=b[i - 1], quat=_leg_frame(direction))
+        cyl.sleep = PLATFORM_SLEEP
         for suffix, axis in (("a", [1.0, 0, 0]), ("b", [0, 1.0, 0])):
             # Cardan joint: the neutral axis is the home leg direction, limits about it.
             cyl.add_joint(name=f"u{i}_{suffix}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis,
@@ -269,6 +276,7 @@ def build_stewart_spec(cfg: StewartConfig = StewartConfig(),
     quat0 = np.zeros(4)
     mujoco.mju_mat2Quat(quat0, np.ascontiguousarray(rot0).ravel())
     plat = spec.worldbody.add_body(name="platform", pos=pos0, quat=quat0)
+    plat.sleep = PLATFORM_SLEEP
     plat.add_freejoint(name="platform_free")
     plat.add_geom(name="platform_disc", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                   size=[cfg.platform_radius, cfg.platform_thickness / 2, 0],

@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 
 from sim import names
-from sim.physics import PhysicsConfig
+from sim.physics import PhysicsConfig, wake_tree_of
 from sim.scene import SceneConfig, build_scene
 from sim.stewart import loop_site_ids, loop_violation
 
@@ -29,6 +29,7 @@ def loop_hold_and_stroke(
         mujoco.mj_step(m, d)
         rest = max(rest, loop_violation(m, d, site_ids=sites))
     start = d.ctrl[scene.leg_actuators].copy()
+    platform_dof = m.body_dofadr[m.body(names.STEWART + "platform").id]
     motion = 0.0
     settle = round(0.5 / dt)  # first move from home to the low end, then the full stroke
     n = round(ramp_s / dt)
@@ -38,6 +39,7 @@ def loop_hold_and_stroke(
         else:
             u = min(1.0, (i - settle) / n)
             target = np.full(6, low + (high - low) * 0.5 * (1 - np.cos(np.pi * u)))
+        wake_tree_of(d, platform_dof)  # the still platform may have fallen asleep
         d.ctrl[scene.leg_actuators] = target
         scene.gravity_hold_arm()
         mujoco.mj_step(m, d)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from sim.errors import ConfigError
-from sim.physics import PhysicsConfig
+from sim.physics import PhysicsConfig, wake_tree_of
 from sim.stewart import (
     N_LEGS,
     StewartConfig,
@@ -122,6 +122,9 @@ def test_closed_loops_hold_under_gravity(model: mujoco.MjModel) -> None:
     assert np.linalg.norm(pos - CFG.home_pos) <= 1e-5, f"pose error {(pos - CFG.home_pos) * 1e6} um"
     assert _quat_angle(quat, IDENTITY) < 1e-5
     # Gravity really loads the legs: their net axial force carries the weight (legs tilt ~13 deg).
+    # The still platform has fallen asleep, and a sleeping tree reports no actuator force.
+    wake_tree_of(data, model.body_dofadr[model.body("platform").id])
+    mujoco.mj_forward(model, data)
     weight = -model.opt.gravity[2] * float(np.sum(model.body_mass))
     assert 0.5 * weight < float(np.sum(data.actuator_force)) < 1.5 * weight
 
