@@ -20,10 +20,10 @@ from tasks.episode_config import EpisodeConfig, scene_config
 from tasks.stewart_campaign import N_POSES, MocapNoise, calibrate
 from tasks.stewart_params import load_stewart_parameters, save_stewart_parameters
 
-CALIBRATION_VERSION = 2
+CALIBRATION_VERSION = 3
 """Bump when the Stewart campaign, solver or the simulated cell changes (invalidates cached
 parameter files). 2: wedge bores (lighter plate) and the commander starting from its model's
-reading of the legs in force."""
+reading of the legs in force. 3: the still platform sleeps (settles to 0.05 um first)."""
 
 Log = Callable[[str], None]
 
