@@ -1,5 +1,6 @@
 """Arm kinematic calibration as staged pure functions (FIGAROH's regressor -> base parameters
--> solve -> metrics), for the geometric and the gravity-aware model of seed 003.
+-> solve -> metrics), for the geometric and the gravity-aware model of seed 003, in either
+form of the geometric error model (MD-H+beta or POE, :attr:`identify.arm_model.ArmModel.form`).
 
 1. :func:`identifiability_of`: error Jacobian of a generic pose set of the campaign's layout
    -> which parameters are independent, correlated or non-functional; then the campaign's own
@@ -24,7 +25,6 @@ import scipy.stats
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from identify.arm_design import generic_design
 from identify.arm_identifiability import IdentifiabilityReport, check_design, identifiability
 from identify.arm_measurements import Measurements, PointSet
 from identify.arm_model import (
@@ -40,6 +40,7 @@ from identify.arm_model import (
     residuals_and_jacobian,
 )
 from identify.errors import IdentificationError
+from identify.poe_design import design_for
 
 COMPLIANCE_ALPHA = 0.01
 """Significance level at which the joint compliances must improve the fit to be kept."""
@@ -90,7 +91,7 @@ def identifiability_of(model: ArmModel, meas: Measurements,
     x0 = initial_parameters(model, meas) if x0 is None else np.asarray(x0, float)
     names = parameter_names(model, meas)
     fitted, order = fitted_mask(model, meas), preference(model, meas)
-    gen, gen_x0 = generic_design(model, meas, x0)
+    gen, gen_x0 = design_for(model, meas, x0)
     generic = identifiability(residuals_and_jacobian(model, gen, gen_x0)[1], names, fitted,
                               order)
     jac = residuals_and_jacobian(model, meas, x0)[1]

@@ -65,14 +65,18 @@ class IdentifiabilityReport:
             return "non-functional"
         return "fixed" if i in self.fixed else "correlated"
 
-    def relations(self, nuisance: str = "socket") -> list[str]:
+    def relations(self, nuisance: str = "socket", max_terms: int | None = None) -> list[str]:
         """One line per correlated parameter, e.g. ``j1.d = +1 base.tz``; terms in nuisance
-        parameters (names starting with ``nuisance``) are summarised as one."""
+        parameters (names starting with ``nuisance``) are summarised as one; ``max_terms``:
+        name only the first that many other terms and count the rest."""
         out = []
         for i, terms in self.correlated:
             named = [f"{c:+.4g} {self.names[k]}" for k, c in terms
                      if not self.names[k].startswith(nuisance)]
-            if len(named) < len(terms):
+            n_named = len(named)
+            if max_terms is not None and n_named > max_terms:
+                named = named[:max_terms] + [f"... ({n_named - max_terms} more)"]
+            if n_named < len(terms):
                 named.append(f"{'+ ' if named else ''}the {nuisance} centres")
             out.append(f"{self.names[i]} = {' '.join(named) or '(noise level)'}")
         return out

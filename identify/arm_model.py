@@ -6,11 +6,14 @@ parameters: the unknown socket centres of a point-consistency set first (nuisanc
 parameters: a base-frame error that only moves every socket is absorbed by them), then the
 chain's base, link and tool errors, then the joint compliances.
 
-Geometric model: the tool frame of the MD-H(+beta) chain at the encoder angles q.
+Geometric model: the tool frame of the kinematic chain at the encoder angles q, in either of
+two forms: the MD-H(+beta) chain of :mod:`identify.mdh` (seed 003) or the product of
+exponentials of :mod:`identify.poe_calibration` (seed 001); :func:`chain_kinematics` hides
+which, so everything below serves both.
 Gravity-aware model (seed 003 §5, as joint compliance): the links stand at
 ``q + c * tau_g(q)``, with ``tau_g`` the nominal model's gravity torque (supplied with the
 measurements) and ``c`` [rad/(N m)] one compliance per joint, so the deflection enters the
-error Jacobian through the joint columns, ``dJ/dc_j = J_theta_j * tau_g,j``. Like the paper
+error Jacobian through the joint columns, ``dJ/dc_j = J_q_j * tau_g,j``. Like the paper
 the deflection is computed from nominal parameters, not from the erroneous geometry.
 """
 
@@ -25,7 +28,11 @@ from scipy.spatial.transform import Rotation
 from identify.arm_measurements import Measurements, PointSet, PoseSet
 from identify.errors import IdentificationError
 from identify.mdh import Chain, chain_frames, forward, pose_jacobian
+from identify.poe_calibration import PoeChain, poe_kinematics
 from sim.errors import ConfigError
+
+FORMS = ("mdh", "poe")
+"""The two forms of the geometric error model (:attr:`ArmModel.form`)."""
 
 
 @dataclass(frozen=True)
@@ -56,14 +63,15 @@ class ArmModel:
     (name prefixes, e.g. ``("tool.t",)``) restricts the fitted chain parameters; ``prior``
     regularises the solve (None: plain least squares, unbiased)."""
 
-    chain: Chain
+    chain: Chain | PoeChain
     gravity: bool = False
     only: tuple[str, ...] = ()
     prior: Prior | None = None
 
     def __post_init__(self) -> None:
-        if not isinstance(self.chain, Chain):
-            raise ConfigError("ArmModel.chain must be an identify.mdh.Chain")
+        if not isinstance(self.chain, (Chain, PoeChain)):
+            raise ConfigError("ArmModel.chain must be an identify.mdh.Chain (form mdh) or an "
+                              "identify.poe_calibration.PoeChain (form poe)")
         if self.prior is not None and not isinstance(self.prior, Prior):
             raise ConfigError("ArmModel.prior must be an identify.arm_model.Prior or None")
         for prefix in self.only:
@@ -74,6 +82,35 @@ class ArmModel:
     @property
     def label(self) -> str:
         return "gravity" if self.gravity else "geometric"
+
+    @property
+    def form(self) -> str:
+        """``mdh`` or ``poe`` (one of :data:`FORMS`)."""
+        return "poe" if isinstance(self.chain, PoeChain) else "mdh"
+
+
+def chain_kinematics(chain: Chain | PoeChain, values: NDArray[np.float64],
+                     q: NDArray[np.float64], params: bool = True
+                     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Tool frames (N, 4, 4), their Jacobian (N, 6, E) with respect to the chain's values and
+    (N, 6, n) with respect to the joint angles, rows [d position; d rotation], either form.
+    ``params=False``: the POE form skips the parameter Jacobian (returned empty, (N, 6, 0))."""
+    if isinstance(chain, PoeChain):
+        kin = poe_kinematics(chain, values, q, params)
+        jac = kin.jacobian if kin.jacobian is not None else np.zeros(kin.tool.shape[:1] + (6, 0))
+        return kin.tool, jac, kin.joint_jacobian
+    frames = chain_frames(chain, values, q)
+    jac = pose_jacobian(chain, frames)
+    # a joint's angle adds to its theta element, so both have the same column
+    return frames.tool, jac, jac[:, :, chain.joint_elements]
+
+
+def chain_forward(chain: Chain | PoeChain, values: NDArray[np.float64], q: NDArray[np.float64]
+                  ) -> NDArray[np.float64]:
+    """(N, 4, 4) tool frames, either form."""
+    if isinstance(chain, PoeChain):
+        return poe_kinematics(chain, values, q, params=False).tool
+    return forward(chain, values, q)
 
 
 @dataclass(frozen=True)
@@ -114,12 +151,18 @@ PREFERENCE = (("socket", 0), ("tool.t", 1), (".beta", 3), ("tool.r", 4), ("c", 5
 listed rank 2): socket centres, then the tool offset (what a point-consistency campaign is
 asked for), then the D-H parameters, then beta, which seed 003 uses only where the four D-H
 parameters cannot describe a link (parallel axes), then tool rotations and compliances."""
+POE_PREFERENCE = (("socket", 0), ("tool.t", 1), ("base.", 3), ("tool.r", 4), ("c", 5))
+"""The same for the POE form, with the base frame after the joint twists: a base error is
+the same rigid motion of every twist and of M, so the gauge is fixed by holding the base at
+nominal (the twists are expressed directly in the measurement frame; POE needs no base)."""
 
 
 def preference(model: ArmModel, meas: Measurements) -> NDArray[np.int64]:
-    """Per parameter, its rank in :data:`PREFERENCE`."""
+    """Per parameter, its rank in :data:`PREFERENCE` (:data:`POE_PREFERENCE` for the POE form)."""
+    table = POE_PREFERENCE if model.form == "poe" else PREFERENCE
+
     def rank(name: str) -> int:
-        for key, r in PREFERENCE:
+        for key, r in table:
             if name.startswith(key) or (key.startswith(".") and name.endswith(key)):
                 return r
         return 2
@@ -164,7 +207,8 @@ def predict(model: ArmModel, x: NDArray[np.float64], lay: Layout, q: NDArray[np.
             tau: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """(N, 4, 4) tool frames the identified model predicts at encoder angles q."""
     _, dchain, comp = lay.split(x)
-    return forward(model.chain, model.chain.values(dchain), joint_angles(model, comp, q, tau))
+    return chain_forward(model.chain, model.chain.values(dchain),
+                         joint_angles(model, comp, q, tau))
 
 
 def initial_parameters(model: ArmModel, meas: Measurements,
@@ -190,19 +234,18 @@ def residuals_and_jacobian(model: ArmModel, meas: Measurements, x: NDArray[np.fl
     points, dchain, comp = lay.split(x)
     tau = meas.tau_gravity
     q_link = joint_angles(model, comp, meas.q, tau)
-    frames = chain_frames(model.chain, model.chain.values(dchain), q_link)
-    jac = pose_jacobian(model.chain, frames)                       # (N, 6, E)
-    blocks = [np.zeros((len(meas.q), 6, 3 * lay.n_points)), jac]
+    tool, jac, jac_q = chain_kinematics(model.chain, model.chain.values(dchain), q_link)
+    blocks = [np.zeros((len(meas.q), 6, 3 * lay.n_points)), jac]   # jac: (N, 6, E)
     if model.gravity:
-        blocks.append(jac[:, :, model.chain.joint_elements] * np.asarray(tau)[:, None, :])
+        blocks.append(jac_q * np.asarray(tau)[:, None, :])
     full = np.concatenate(blocks, axis=2)                          # (N, 6, P)
-    tool_p = frames.tool[:, :3, 3]
+    tool_p = tool[:, :3, 3]
     if isinstance(meas, PointSet):
         return _point_rows(meas, lay, points, tool_p, full)
     r = [(tool_p - meas.position).ravel() / meas.sigma]
     j = [full[:, :3].reshape(-1, lay.size) / meas.sigma]
     if isinstance(meas, PoseSet):
-        err = Rotation.from_matrix(frames.tool[:, :3, :3] @ meas.rotation.transpose(0, 2, 1))
+        err = Rotation.from_matrix(tool[:, :3, :3] @ meas.rotation.transpose(0, 2, 1))
         r.append(err.as_rotvec().ravel() / meas.sigma_rotation)
         j.append(full[:, 3:].reshape(-1, lay.size) / meas.sigma_rotation)
     return np.concatenate(r), np.concatenate(j)

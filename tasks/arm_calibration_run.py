@@ -3,7 +3,9 @@ training + 100 verification poses on the MuJoCo plant of :mod:`tasks.arm_truth`)
 leave-one-placement-out evaluation of a panda_1-layout point-consistency folder.
 
 Both run the same pipeline (:func:`identify.arm_calibration.calibrate`) with the same
-regularisation prior, for the geometric and the gravity-aware model.
+regularisation prior, for the geometric and the gravity-aware model, in either form of the
+geometric error model: ``mdh`` (MD-H+beta, seed 003) or ``poe`` (product of exponentials,
+seed 001).
 """
 
 from __future__ import annotations
@@ -26,13 +28,14 @@ from identify.arm_calibration import (
 )
 from identify.arm_identifiability import IdentifiabilityReport
 from identify.arm_measurements import Measurements
-from identify.arm_model import ArmModel, Prior
+from identify.arm_model import FORMS, ArmModel, Prior, chain_forward
 from identify.errors import IdentificationError
-from identify.mdh import Chain, forward, panda_chain
+from identify.mdh import Chain, panda_chain
 from identify.panda_data import load_panda_folder
+from identify.poe_calibration import PoeChain, panda_poe_chain
 from sim.arm import FLANGE_D
 from sim.errors import UnknownNameError
-from tasks.arm_truth import TruthConfig, nominal_plant, run_campaign
+from tasks.arm_truth import Campaign, TruthConfig, nominal_plant, run_campaign
 
 MODELS = ("geometric", "gravity")
 PAPER_MEAN_REDUCTION = {"x": 0.20, "y": 0.17}
@@ -49,7 +52,15 @@ def check_models(models: tuple[str, ...]) -> tuple[str, ...]:
     return models
 
 
-def _fit(chain: Chain, name: str, meas: Measurements, start: NDArray[np.float64] | None = None
+def form_chain(form: str, tool_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+               ) -> Chain | PoeChain:
+    """The nominal Panda in the named form of the geometric error model (:data:`FORMS`)."""
+    if form not in FORMS:
+        raise UnknownNameError("error-model form", form, FORMS)
+    return panda_chain(tool_offset) if form == "mdh" else panda_poe_chain(tool_offset)
+
+
+def _fit(chain: Chain | PoeChain, name: str, meas: Measurements, start: NDArray[np.float64] | None = None
          ) -> tuple[ArmCalibration, ComplianceTest | None]:
     """One model's calibration; the gravity-aware one keeps its compliances only when the
     training data support them (F-test), so it cannot do worse than geometry by over-fitting."""
@@ -75,6 +86,7 @@ class SimResult:
     config: TruthConfig
     rows: tuple[SimRow, ...]
     max_deflection_rad: NDArray[np.float64]
+    form: str = "mdh"
 
     def reduction(self, a: str, b: str) -> tuple[float, float, float]:
         """Relative drop of the mean |x|, |y|, |z| error from row ``a`` to row ``b``."""
@@ -85,7 +97,8 @@ class SimResult:
         rows = {r.label: {"verify": r.verify.as_dict(), "verify_truth": r.verify_truth.as_dict(),
                           **(_cal_dict(r.calibration, r.compliance_test) if r.calibration else {})}
                 for r in self.rows}
-        out: dict[str, object] = {"seed": self.config.seed, "n_train": self.config.n_train,
+        out: dict[str, object] = {"form": self.form, "seed": self.config.seed,
+                                  "n_train": self.config.n_train,
                                   "n_verify": self.config.n_verify,
                                   "stiffness_nm_per_rad": self.config.stiffness,
                                   "max_deflection_rad": self.max_deflection_rad.tolist(),
@@ -95,12 +108,15 @@ class SimResult:
         return out
 
 
-def simulated_calibration(cfg: TruthConfig, models: tuple[str, ...] = MODELS) -> SimResult:
-    """Uncalibrated and calibrated errors on the verification poses of the hidden plant."""
+def simulated_calibration(cfg: TruthConfig, models: tuple[str, ...] = MODELS,
+                          form: str = "mdh", campaign: Campaign | None = None) -> SimResult:
+    """Uncalibrated and calibrated errors on the verification poses of the hidden plant, with
+    the ``form`` of the error model; ``campaign``: measurements of ``cfg`` already taken (so
+    both forms can be compared on the same data), else measured here."""
     check_models(models)
-    camp = run_campaign(cfg)
-    chain = cfg.nominal_chain()
-    nominal = forward(chain, chain.values(), camp.verify.q)[:, :3, 3]
+    chain = cfg.nominal_chain() if form == "mdh" else form_chain(form, cfg.tool_offset_m)
+    camp = run_campaign(cfg) if campaign is None else campaign
+    nominal = chain_forward(chain, chain.values(), camp.verify.q)[:, :3, 3]
     rows = [SimRow("uncalibrated", position_error_stats(nominal, camp.verify.position),
                    position_error_stats(nominal, camp.verify_truth), None)]
     for name in models:
@@ -108,7 +124,7 @@ def simulated_calibration(cfg: TruthConfig, models: tuple[str, ...] = MODELS) ->
         pred = cal.predict_positions(camp.verify.q, camp.verify.tau_gravity)
         rows.append(SimRow(name, position_error_stats(pred, camp.verify.position),
                            position_error_stats(pred, camp.verify_truth), cal, test))
-    return SimResult(cfg, tuple(rows), np.abs(camp.deflection_rad).max(axis=0))
+    return SimResult(cfg, tuple(rows), np.abs(camp.deflection_rad).max(axis=0), form)
 
 
 @dataclass(frozen=True)
@@ -124,19 +140,19 @@ class FoldRow:
 
 
 def real_data_calibration(folder: str, models: tuple[str, ...] = MODELS,
-                          progress: Callable[[int], object] | None = None
+                          progress: Callable[[int], object] | None = None, form: str = "mdh"
                           ) -> tuple[FoldRow, ...]:
     """Per tool placement: calibrate on the other placements, score the held-out one. The
     "nominal" row is the Panda's nominal table with only the ball offset fitted.
-    ``progress(1)`` is called after each held-out placement."""
+    ``progress(1)`` is called after each held-out placement; ``form``: of the error model."""
     check_models(models)
+    chain = form_chain(form)
     data = load_panda_folder(folder)
     if len(data.placements) < 3:
         raise IdentificationError(f"{folder}: {len(data.placements)} tool placement folder(s) "
                                   f"({', '.join(data.placements)}); training on two and testing "
                                   "on a third needs at least 3")
     plant = nominal_plant(REAL_GRAVITY_PLANT)
-    chain = panda_chain()
     rows = []
     for test in data.placements:
         train = tuple(p for p in data.placements if p != test)
@@ -155,10 +171,13 @@ def real_data_calibration(folder: str, models: tuple[str, ...] = MODELS,
     return tuple(rows)
 
 
-def _ball(chain: Chain, cal: ArmCalibration) -> NDArray[np.float64]:
+def _ball(chain: Chain | PoeChain, cal: ArmCalibration) -> NDArray[np.float64]:
     """Tool point relative to the nominal flange: tool translation plus the j7.d error (the
-    two are one redundant pair; whichever the analysis kept holds the sum)."""
+    two are one redundant pair; whichever the analysis kept holds the sum). In POE form the
+    tool error alone places it (M's frame is the flange's at q = 0)."""
     err = cal.chain_errors
+    if isinstance(chain, PoeChain):
+        return chain.tool_shift(err)  # chain built with a zero offset
     values = chain.values(err)
     names = chain.names
     tool = np.array([values[names.index(f"tool.t{a}")] for a in "xyz"])
@@ -174,6 +193,7 @@ def _cal_dict(cal: ArmCalibration, test: ComplianceTest | None) -> dict[str, obj
 
 
 def fold_dict(row: FoldRow) -> dict[str, object]:
-    return {"test": row.test, "model": row.label, "train": row.train.as_dict(),
+    return {"test": row.test, "model": row.label, "form": row.calibration.model.form,
+            "train": row.train.as_dict(),
             "held_out": row.held_out.as_dict(), "ball_offset_m": row.ball_offset_m.tolist(),
             **_cal_dict(row.calibration, row.compliance_test)}
