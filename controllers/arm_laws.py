@@ -8,6 +8,7 @@ wrenches are (linear, angular) with torques about the TCP.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import mujoco
 import numpy as np
@@ -56,6 +57,14 @@ class ImpedanceGains:
         _positive("stiffness", self.stiffness, 6, strict=True)
         _positive("damping", self.damping, 6)
         _positive("nullspace gains", (self.nullspace_stiffness, self.nullspace_damping), 2)
+
+    @cached_property
+    def stiffness_array(self) -> Vec:
+        return np.asarray(self.stiffness, dtype=float)
+
+    @cached_property
+    def damping_array(self) -> Vec:
+        return np.asarray(self.damping, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -130,20 +139,20 @@ def impedance_torque(nominal: NominalArm, target: CartesianTarget, gains: Impeda
     idx = nominal.index
     q, dq = nominal.data.qpos[idx.qpos], nominal.data.qvel[idx.dof]
     jac = nominal.tcp_jacobian()
-    mass = nominal.mass()
-    minv_jt = np.linalg.solve(mass, jac.T)
+    minv_jt = np.linalg.solve(nominal.mass(), jac.T)
     lam = np.linalg.inv(jac @ minv_jt)
     # acc* - Jdot dq: the Cartesian acceleration the joint accelerations must add.
     acc = target.acc - nominal.tcp_jacobian_dot() @ dq
-    wrench = (lam @ acc + np.asarray(gains.stiffness) * pose_error(nominal, target)
-              + np.asarray(gains.damping) * (target.vel - jac @ dq))
+    wrench = (lam @ acc + gains.stiffness_array * pose_error(nominal, target)
+              + gains.damping_array * (target.vel - jac @ dq))
     if force_ff is not None:
         wrench = wrench + force_ff
-    posture = np.asarray(HOME_Q if q_posture is None else q_posture)
+    posture = HOME_Q if q_posture is None else q_posture
     tau_null = gains.nullspace_stiffness * (posture - q) - gains.nullspace_damping * dq
-    # Dynamically consistent projector: the posture torque cannot disturb the TCP.
-    null_proj = np.eye(N_JOINTS) - jac.T @ (lam @ minv_jt.T)
-    return jac.T @ wrench + null_proj @ tau_null + nominal.bias()
+    # Dynamically consistent projection (I - J^T Lambda J M^-1) tau_null, as vectors: the
+    # posture torque cannot disturb the TCP.
+    wrench = wrench - lam @ (minv_jt.T @ tau_null)
+    return jac.T @ wrench + tau_null + nominal.bias()
 
 
 def force_position_torque(nominal: NominalArm, target: CartesianTarget, gains: ForcePositionGains,

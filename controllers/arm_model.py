@@ -72,6 +72,8 @@ class NominalArm:
         self._jac = np.zeros((6, self.model.nv))
         self._mass = np.zeros((self.model.nv, self.model.nv))
         self._rne = np.zeros(self.model.nv)
+        self._jac_dot = np.zeros((6, self.model.nv))
+        self._arm_block = np.ix_(self.index.dof, self.index.dof)
 
     def load(self, q: Vec, dq: Vec) -> None:
         """Evaluate kinematics, mass matrix and bias forces at (q, dq)."""
@@ -97,8 +99,7 @@ class NominalArm:
 
     def tcp_jacobian_dot(self) -> Vec:
         """6x7 time derivative of the TCP Jacobian at the loaded (q, dq)."""
-        site = self.index.tcp_site
-        jd = np.zeros((6, self.model.nv))
+        site, jd = self.index.tcp_site, self._jac_dot
         mujoco.mj_jacDot(self.model, self.data, jd[:3], jd[3:], self.data.site_xpos[site],
                          self.model.site_bodyid[site])
         return jd[:, self.index.dof]
@@ -110,7 +111,7 @@ class NominalArm:
     def mass(self) -> Vec:
         """7x7 joint-space inertia including rotor armature (what the motors accelerate)."""
         mujoco.mj_fullM(self.model, self.data, self._mass)
-        return self._mass[np.ix_(self.index.dof, self.index.dof)].copy()
+        return self._mass[self._arm_block]
 
     def bias(self) -> Vec:
         """Model torques the motors must supply at rest acceleration: c(q, dq) + g(q) plus the

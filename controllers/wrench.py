@@ -18,6 +18,7 @@ from controllers.arm_model import NominalArm
 from sim.errors import ConfigError
 
 Vec = NDArray[np.float64]
+_EYE6 = np.eye(6)
 
 
 def external_joint_torque(nominal: NominalArm, ddq: Vec, tau_J: Vec) -> Vec:
@@ -27,7 +28,7 @@ def external_joint_torque(nominal: NominalArm, ddq: Vec, tau_J: Vec) -> Vec:
 
 def tcp_wrench(jac: Vec, tau_ext: Vec, damping: float = 1e-9) -> Vec:
     """Least-squares F_ext with J^T F_ext = tau_ext; damping keeps it finite near singularities."""
-    return np.linalg.solve(jac @ jac.T + damping * np.eye(6), jac @ tau_ext)
+    return np.linalg.solve(jac @ jac.T + damping * _EYE6, jac @ tau_ext)
 
 
 def lowpass_alpha(cutoff_hz: float, dt: float) -> float:

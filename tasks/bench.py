@@ -2,8 +2,8 @@
 
 Every rate is the best of `repeats` timings (the least disturbed by the machine), in physics
 steps per wall second; real-time factor = simulated seconds per wall second. The loop figures
-are timed from a saved state, then bare `mj_step` is timed from the same state for the same
-number of steps with the controls frozen: their ratio is the loop's overhead on the floor.
+are timed from a saved state, then bare `mj_step` is timed from the same state replaying the
+controls the loop wrote: their ratio is the loop's overhead on the floor.
 """
 
 from __future__ import annotations
@@ -79,19 +79,25 @@ def bare_rate(scene_config: SceneConfig, cfg: BenchConfig) -> Rate:
 
 def _loop_vs_bare(scene: Scene, ctrl: ArmController, command: Callable[[float], None],
                   cfg: BenchConfig) -> dict[str, object]:
+    """The control loop, then bare `mj_step` replaying the loop's own controls from the same
+    state: the same trajectory, contacts and sleeping, so the ratio is the loop's cost alone.
+    (Frozen controls let the arm drift off its contact: a cheaper, other simulation.)"""
     m, d = scene.model, scene.data
     periods = round(cfg.sim_seconds / ctrl.dt)
     n = periods * ctrl.substeps
     restore = _snapshot(scene)
+    controls = np.empty((periods, m.nu))
 
     def loop() -> None:
         for k in range(periods):
             command(k * ctrl.dt)
             ctrl.step(m, d)
+            controls[k] = d.ctrl
 
     def bare() -> None:
-        for _ in range(n):
-            mujoco.mj_step(m, d)
+        for k in range(periods):
+            d.ctrl[:] = controls[k]
+            mujoco.mj_step(m, d, nstep=ctrl.substeps)
 
     looped = _best(loop, restore, n, m.opt.timestep, cfg.repeats)
     floor = _best(bare, restore, n, m.opt.timestep, cfg.repeats)
