@@ -111,7 +111,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="serpar", description=__doc__.split("\n")[0] if __doc__ else None)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser,
-                                metavar="{info,render,validate,control-check,workspace,vision-check,bench,run,ablate,replay,calibrate,error-analysis}")
+                                metavar="{info,render,validate,control-check,workspace,vision-check,bench,run,ablate,replay,calibrate,error-analysis,diagnose,twin,blind-bench,import-csv}")
 
     def scene_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--seed", type=int, help="seed of the tolerance draws (integer; default 0)")
@@ -146,11 +146,15 @@ def build_parser() -> argparse.ArgumentParser:
     from serpar import (
         cmd_ablate,
         cmd_bench,
+        cmd_blind_bench,
         cmd_calibrate,
         cmd_control_check,
+        cmd_diagnose,
         cmd_error_analysis,
+        cmd_import_csv,
         cmd_replay,
         cmd_run,
+        cmd_twin,
         cmd_vision_check,
         cmd_workspace,
     )
@@ -164,6 +168,10 @@ def build_parser() -> argparse.ArgumentParser:
     cmd_replay.register(sub)
     cmd_calibrate.register(sub)
     cmd_error_analysis.register(sub)
+    cmd_diagnose.register(sub)
+    cmd_twin.register(sub)
+    cmd_blind_bench.register(sub)
+    cmd_import_csv.register(sub)
     return parser
 
 

@@ -1,0 +1,74 @@
+"""Backlash in MuJoCo's own terms: every joint of the arm is a limited hinge whose range is
+the gearbox clearance about the motor angle (zero width for a joint without backlash), with
+the gearbox's dry friction as ``frictionloss``. A pose is reached the way a real arm gets
+there: the link starts where the approach left it (approaching from below it lags the
+motor, at the lower end of the clearance), then MuJoCo integrates gravity, the gearbox
+friction and the stiff limit constraints until the arm is at rest. A link that gravity loads
+beyond the friction falls to the far end of its clearance; one that it does not stays. (A
+slow simulated approach ramp was tried: its inertial torques moved more links off the side
+the approach should leave them on.)
+"""
+
+from __future__ import annotations
+
+import copy
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.arm import JOINT_NAMES
+from sim.errors import ConfigError
+
+TIMESTEP_S = 5e-4
+SETTLE_S = 0.4
+PIN_RAD = 1e-9
+"""Half-width of the range of a joint without backlash (a two-sided stiff limit pins it)."""
+LIMIT_SOLREF = (2 * TIMESTEP_S, 1.0)
+LIMIT_SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
+DAMPING = 5.0
+"""[N m s/rad]: the gearbox's viscous loss, so a released link comes to rest quickly."""
+REST_RAD_S = 1e-4
+"""[rad/s]: "at rest". MuJoCo's dry friction is a soft constraint: a link that gravity loads
+below the friction still creeps, and a link that another link's fall jolts can slip, so a
+few links per hundred poses end part-way across their clearance. The twin reports how many
+poses were still moving (answer ``creeping_poses``) rather than hiding them; the no-slip
+solver, a stiffer friction impedance and a slow approach ramp were tried and made it worse."""
+
+
+def settle_with_backlash(model: mujoco.MjModel, q_cmd: NDArray[np.float64],
+                         approach: NDArray[np.float64], half: NDArray[np.float64],
+                         friction_nm: float
+                         ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Link angles (N, 7) after SETTLE_S for motor angles ``q_cmd`` (N, 7) reached from
+    direction ``approach`` (+1 / -1 per joint), clearance half-widths ``half`` [rad] per
+    joint; and per pose whether a link was still creeping (faster than REST_RAD_S)."""
+    m = copy.copy(model)  # the caller's model keeps its own limits and friction
+    dof = np.array([m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]
+                    for j in JOINT_NAMES])
+    jnt = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in JOINT_NAMES])
+    if m.nv != len(JOINT_NAMES):
+        raise ConfigError(f"the backlash plant expects {len(JOINT_NAMES)} hinges, the model has "
+                          f"{m.nv} degrees of freedom")
+    m.opt.timestep = TIMESTEP_S
+    m.jnt_limited[jnt] = 1
+    m.jnt_solref[jnt] = LIMIT_SOLREF
+    m.jnt_solimp[jnt] = LIMIT_SOLIMP
+    m.dof_damping[dof] = DAMPING
+    m.dof_frictionloss[dof] = np.where(np.asarray(half) > 0, friction_nm, 0.0)
+    m.dof_solref[dof] = LIMIT_SOLREF  # the stiffest friction the timestep allows: least creep
+    width = np.maximum(np.asarray(half, float), PIN_RAD)
+    d = mujoco.MjData(m)
+    out = np.empty_like(np.atleast_2d(q_cmd))
+    moving = np.zeros(len(out), bool)
+    steps = round(SETTLE_S / TIMESTEP_S)
+    for n, (qc, a) in enumerate(zip(np.atleast_2d(q_cmd), np.atleast_2d(approach))):
+        m.jnt_range[jnt, 0] = qc - width
+        m.jnt_range[jnt, 1] = qc + width
+        mujoco.mj_resetData(m, d)
+        d.qpos[dof] = qc - a * np.asarray(half)  # where the approach left it: lagging
+        for _ in range(steps):
+            mujoco.mj_step(m, d)
+        moving[n] = np.abs(d.qvel).max() > REST_RAD_S
+        out[n] = d.qpos[dof]
+    return out, moving
