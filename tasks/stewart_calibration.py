@@ -2,11 +2,14 @@
 platform, a measurement campaign through its nominal model, identification by each solver,
 compensation, and the campaign repeated through the identified model.
 
-Measurements come from one of two sources, and only the measuring device sees the truth:
-'cell', the MuJoCo cell (leg servos, closed loops, the plate on top; :mod:`tasks.stewart_campaign`)
-or 'kinematic', the built geometry's exact kinematics (fast, for studies). Errors before and
-after are scored against the simulator's true pose at the training poses (as the seed does)
-and at separate random verification poses.
+Measurements come from one of three sources, and only the measuring device sees the truth:
+'cell', the MuJoCo cell (leg servos, closed loops, the plate on top) measured by simulated motion
+capture (:mod:`tasks.stewart_campaign`); 'stereo', the same cell measured by the top stereo pair
+from rendered pixels (:mod:`tasks.stewart_stereo`); or 'kinematic', the built geometry's exact
+kinematics with motion capture (fast, for studies). Errors before and after are scored against
+the simulator's true pose at the training poses (as the seed does) and at separate random
+verification poses: in the Stewart base frame for motion capture, in the frame registered at
+home for the cameras (the frame the cell uses them in; see :mod:`tasks.stewart_stereo`).
 """
 
 from __future__ import annotations
@@ -34,11 +37,25 @@ from sim.errors import ConfigError
 from sim.scene import SceneConfig
 from sim.stewart import MAX_JOINT_ERROR, StewartConfig, built_geometry
 from tasks.episode_config import table5_errors
-from tasks.stewart_campaign import MocapNoise, measure_with_truth, mocap, random_poses
+from tasks.stewart_campaign import (
+    CampaignResult,
+    MocapNoise,
+    measure_with_truth,
+    mocap,
+    random_poses,
+)
 from tasks.stewart_params import load_stewart_parameters
+from tasks.stewart_stereo import (
+    StereoConfig,
+    planning_view,
+    regauge,
+    stereo_campaign,
+    top_pair,
+    visible_random_poses,
+)
 
 SOLVERS = ("tls", "lm", "pso")
-SOURCES = ("cell", "kinematic")
+SOURCES = ("cell", "kinematic", "stereo")
 POSE_SETS = ("table3", "optimal", "random")
 SEED000_BOX = (5e-3, np.radians(0.5))
 """Seed 000's simulated set-up: initial platform errors within +-5 mm and +-0.5 deg."""
@@ -57,6 +74,9 @@ class StewartCalibrationConfig:
     """'seed000': drawn uniformly and scaled (to first order) so the initial errors at the training poses reach
     seed 000's +-5 mm / +-0.5 deg box; 'table5': seed 000 Table 5; or a parameters file."""
     source: str = "cell"
+    """'cell' (motion capture in the MuJoCo cell), 'stereo' (the top cameras in the cell; `noise`
+    is then unused: the cameras' error is measured) or 'kinematic'."""
+    stereo: StereoConfig = field(default_factory=StereoConfig)
     verify_poses: int = 30
     swarm: SwarmConfig = field(default_factory=SwarmConfig)
     seed: int = 0
@@ -99,6 +119,11 @@ class PoseErrors:
     def rms(self) -> float:
         return float(np.sqrt(np.mean(np.sum(self.position**2, axis=1))))
 
+    @property
+    def rms_angle(self) -> float:
+        """RMS of the rotation error's angle [rad]."""
+        return float(np.sqrt(np.mean(np.sum(self.rotation**2, axis=1))))
+
 
 @dataclass(frozen=True)
 class SolverOutcome:
@@ -110,6 +135,8 @@ class SolverOutcome:
     parameter_error_max_m: float = float("nan")
     failure: str | None = None
     """Why the solver gave no model (e.g. TLS diverging under noise); None when it did."""
+    unreachable: tuple[int, ...] = ()
+    """Stereo: training/verification poses the identified model could not reach (not scored)."""
 
 
 @dataclass(frozen=True)
@@ -122,9 +149,27 @@ class StewartCalibrationReport:
     predicted_rms_m: float
     """RMS position error the noise alone should leave at the verification poses."""
     smallest_singular_value: float
+    source: str = "cell"
+    noise_used: tuple[float, float] = (0.0, 0.0)
+    """Per-axis 1-sigma pose noise [m, rad] the prediction uses: the configured motion-capture
+    noise, or the stereo pair's measured error."""
+    campaign: CampaignResult | None = None
+    """The training campaign: measured vs true poses, skipped poses (stereo)."""
+    planned_poses: int = 0
+    """Poses in the planned set (the training poses are those of them measured)."""
 
 
-def training_poses(cfg: StewartCalibrationConfig, geometry: StewartGeometry) -> Poses:
+def training_poses(cfg: StewartCalibrationConfig, geometry: StewartGeometry,
+                   scene_cfg: SceneConfig | None = None) -> Poses:
+    """The planned pose set. For the stereo source, random and optimal sets are drawn among poses
+    the top pair sees (planned from the cell drawing); Table 3 is taken as it is and its poses
+    out of view are skipped, reported, by the campaign."""
+    if cfg.source == "stereo" and cfg.poses != "table3":
+        visible = planning_view(cfg.stereo, scene_cfg or SceneConfig())
+        if cfg.poses == "random":
+            return visible_random_poses(cfg.n_poses, cfg.seed, geometry, visible)
+        return optimal_poses(geometry, cfg.n_poses, visible_random_poses(20 * cfg.n_poses, cfg.seed + 3, geometry,
+                                                                         visible), cfg.seed)
     if cfg.poses == "table3":
         pos, rot = table3_poses()
         problems = reachable(geometry, pos, rot)
@@ -139,6 +184,12 @@ def training_poses(cfg: StewartCalibrationConfig, geometry: StewartGeometry) -> 
 def pose_errors(true_pos: np.ndarray, true_rot: np.ndarray, pos: np.ndarray, rot: np.ndarray) -> PoseErrors:
     rotvec = Rotation.from_matrix(np.einsum("nij,nkj->nik", true_rot, rot)).as_rotvec()
     return PoseErrors(true_pos - pos, rotvec)
+
+
+def _scored(result: CampaignResult, poses: Poses) -> PoseErrors:
+    """Errors at the poses the campaign reached (a scoring campaign skips only unreachable ones)."""
+    ok = np.all(np.isfinite(result.true_pos), axis=1)
+    return pose_errors(result.true_pos[ok], result.true_rot[ok], poses[0][ok], poses[1][ok])
 
 
 def hidden_errors(cfg: StewartCalibrationConfig, stewart: StewartConfig, train: Poses) -> np.ndarray:
@@ -167,20 +218,35 @@ def _kinematic_truth(stewart: StewartConfig, hidden: np.ndarray, poses: Poses,
     return strokes, np.array([o[0] for o in out]), np.array([o[1] for o in out])
 
 
-Measure = Callable[[Poses, np.ndarray | None, MocapNoise, int], tuple[StewartMeasurements, np.ndarray, np.ndarray]]
+Measure = Callable[[Poses, np.ndarray | None, int, bool], CampaignResult]
 
 
 def measurer(cfg: StewartCalibrationConfig, scene_cfg: SceneConfig, hidden: np.ndarray) -> Measure:
-    """The campaign: (poses, believed errors, noise, seed) -> (measurements, true pos, true rot)."""
-    if cfg.source == "cell":
-        cell = dataclasses.replace(scene_cfg, stewart=dataclasses.replace(scene_cfg.stewart, joint_errors=hidden))
-        return lambda poses, believed, noise, seed: measure_with_truth(cell, *poses, believed, noise, seed)
+    """The campaign: (poses, believed errors, seed, measure) -> CampaignResult; `measure` False
+    (the re-measurements and verification poses) scores the truth only, without noise."""
+    cell = dataclasses.replace(scene_cfg, stewart=dataclasses.replace(scene_cfg.stewart, joint_errors=hidden))
+    if cfg.source == "stereo":
+        pair = top_pair(cfg.stereo)
+        return lambda poses, believed, seed, measure: stereo_campaign(cell, *poses, believed, cfg.stereo,
+                                                                      pair, seed, measure)
 
-    def kinematic(poses: Poses, believed: np.ndarray | None, noise: MocapNoise, seed: int):
-        strokes, true_pos, true_rot = _kinematic_truth(scene_cfg.stewart, hidden, poses, believed)
-        return mocap(strokes, true_pos, true_rot, noise, np.random.default_rng(seed + 7919)), true_pos, true_rot
+    def mocap_campaign(poses: Poses, believed: np.ndarray | None, seed: int, measure: bool) -> CampaignResult:
+        noise = cfg.noise if measure else MocapNoise(0.0, 0.0)
+        if cfg.source == "cell":
+            meas, true_pos, true_rot = measure_with_truth(cell, *poses, believed, noise, seed)
+        else:
+            strokes, true_pos, true_rot = _kinematic_truth(scene_cfg.stewart, hidden, poses, believed)
+            meas = mocap(strokes, true_pos, true_rot, noise, np.random.default_rng(seed + 7919))
+        return CampaignResult(meas if measure else None, true_pos, true_rot, np.arange(len(true_pos)))
 
-    return kinematic
+    return mocap_campaign
+
+
+def measured_noise(campaign: CampaignResult) -> tuple[float, float]:
+    """Per-axis RMS of the measured-minus-true poses: position [m], angle [rad]."""
+    if campaign.meas is None or not len(campaign.kept):
+        return float("nan"), float("nan")
+    return (float(np.sqrt(np.mean(campaign.position_error**2))), float(np.sqrt(np.mean(campaign.angle_error**2))))
 
 
 def solve(name: str, geometry: StewartGeometry, meas: StewartMeasurements, swarm: SwarmConfig) -> StewartIdentification:
@@ -196,15 +262,20 @@ def run_calibration(cfg: StewartCalibrationConfig, scene_cfg: SceneConfig | None
     stage = on_stage or (lambda _: None)
     scene_cfg = scene_cfg or SceneConfig()
     geometry = scene_cfg.stewart.geometry()
-    train = training_poses(cfg, geometry)
+    train = training_poses(cfg, geometry, scene_cfg)
     verify = random_poses(cfg.verify_poses, cfg.seed + 1, geometry)
     hidden = hidden_errors(cfg, scene_cfg.stewart, train)
     campaign = measurer(cfg, scene_cfg, hidden)
-    stage("measuring the training poses through the nominal model")
-    meas, tpos, trot = campaign(train, None, cfg.noise, cfg.seed)
-    before_train = pose_errors(tpos, trot, *train)
+    planned = len(train[0])
+    stage(f"measuring the training poses through the nominal model ({cfg.source})")
+    first = campaign(train, None, cfg.seed, True)
+    train = (train[0][first.kept], train[1][first.kept])  # the poses measured (stereo may skip some)
+    if first.meas is None:
+        raise ConfigError(f"the {cfg.source} campaign measured nothing")
+    meas = first.meas
+    before_train = pose_errors(first.true_pos[first.kept], first.true_rot[first.kept], *train)
     stage("measuring the verification poses through the nominal model")
-    _, vpos, vrot = campaign(verify, None, MocapNoise(0.0, 0.0), cfg.seed + 1)
+    verified = campaign(verify, None, cfg.seed + 1, False)
     outcomes = []
     for name in cfg.solvers:
         stage(f"identifying with {name}")
@@ -215,12 +286,16 @@ def run_calibration(cfg: StewartCalibrationConfig, scene_cfg: SceneConfig | None
             outcomes.append(SolverOutcome(name, time.perf_counter() - t0, failure=str(exc)))
             continue
         seconds = time.perf_counter() - t0
+        if cfg.source == "stereo":  # the frame closest to the design (see regauge)
+            ident = dataclasses.replace(ident, errors=regauge(ident.errors, geometry))
         stage(f"re-measuring through the {name}-identified model")
-        _, apos, arot = campaign(train, ident.errors, MocapNoise(0.0, 0.0), cfg.seed)
-        _, avpos, avrot = campaign(verify, ident.errors, MocapNoise(0.0, 0.0), cfg.seed + 1)
-        outcomes.append(SolverOutcome(name, seconds, ident, pose_errors(apos, arot, *train),
-                                      pose_errors(avpos, avrot, *verify),
-                                      float(np.abs(ident.errors - hidden).max())))
-    predicted = predicted_error_rms(geometry, train, verify, cfg.noise.position_m, np.radians(cfg.noise.angle_deg))
-    return StewartCalibrationReport(hidden, train, before_train, pose_errors(vpos, vrot, *verify), outcomes,
-                                    predicted, smallest_singular_value(geometry, *train))
+        after = campaign(train, ident.errors, cfg.seed, False)
+        after_v = campaign(verify, ident.errors, cfg.seed + 1, False)
+        outcomes.append(SolverOutcome(name, seconds, ident, _scored(after, train), _scored(after_v, verify),
+                                      float(np.abs(ident.errors - hidden).max()),
+                                      unreachable=tuple(k for k, _ in after.skipped + after_v.skipped)))
+    sigma = measured_noise(first) if cfg.source == "stereo" else (cfg.noise.position_m, np.radians(cfg.noise.angle_deg))
+    predicted = predicted_error_rms(geometry, train, verify, *sigma)
+    return StewartCalibrationReport(hidden, train, before_train, _scored(verified, verify), outcomes,
+                                    predicted, smallest_singular_value(geometry, *train), cfg.source, sigma, first,
+                                    planned)

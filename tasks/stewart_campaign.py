@@ -12,6 +12,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from controllers.rotations import so3_exp
 from controllers.stewart_kinematics import StewartGeometry, check_pose, require_pose
@@ -19,7 +20,7 @@ from controllers.stewart_servo import platform_pose
 from identify.stewart_identification import StewartIdentification, StewartMeasurements, identify_lm
 from sim import names
 from sim.errors import ConfigError
-from sim.scene import SceneConfig, build_scene
+from sim.scene import Scene, SceneConfig, build_scene
 from tasks.arm_checks import controller_config
 from tasks.cell_runtime import CellRuntime
 from tasks.stewart_correction import PlateCommander, transform
@@ -76,21 +77,70 @@ def measure_with_truth(scene_cfg: SceneConfig, pos: np.ndarray, rot: np.ndarray,
                        believed: np.ndarray | None = None, noise: MocapNoise = MocapNoise(),
                        seed: int = 0) -> tuple[StewartMeasurements, np.ndarray, np.ndarray]:
     """:func:`measure`, and the simulator's true poses (pos (N, 3), rot (N, 3, 3)) for scoring."""
-    scene = build_scene(dataclasses.replace(scene_cfg, n_conductors=0))
-    rt = CellRuntime.create(scene, controller_config(noise=False), seed=seed)
-    plate = PlateCommander.create(scene.model, scene.data, scene_cfg.stewart, believed)
-    rt.observers.append(lambda r: plate.update(r.scene.data, r.time))
+    cell = CampaignCell.create(scene_cfg, believed, seed)
     rng = np.random.default_rng(seed + 7919)
-    strokes, tpos, trot = [], [], []
-    for p, r in zip(pos, rot):
-        require_pose(plate.geometry, p, r)
-        goal = transform(r, p)
-        rt.run(plate.move_to(scene.data, goal, rt.time, CAMPAIGN_SPEED) + SETTLE_S)
-        true_pos, true_rot = platform_pose(scene.model, scene.data, names.STEWART)
-        strokes.append(plate.strokes(goal))
-        tpos.append(true_pos)
-        trot.append(true_rot)
-    return mocap(np.array(strokes), np.array(tpos), np.array(trot), noise, rng), np.array(tpos), np.array(trot)
+    settled = [cell.settle_at(p, r) for p, r in zip(pos, rot)]
+    strokes, tpos, trot = (np.array([s[i] for s in settled]) for i in range(3))
+    return mocap(strokes, tpos, trot, noise, rng), tpos, trot
+
+
+@dataclass
+class CampaignCell:
+    """The cell a campaign drives: the platform (with its hidden errors) commanded through the
+    model with the `believed` errors, no conductors, the arm holding its start pose (out of the
+    top cameras' view of the plate)."""
+
+    scene: Scene
+    rt: CellRuntime
+    plate: PlateCommander
+
+    @classmethod
+    def create(cls, scene_cfg: SceneConfig, believed: np.ndarray | None, seed: int) -> CampaignCell:
+        scene = build_scene(dataclasses.replace(scene_cfg, n_conductors=0))
+        rt = CellRuntime.create(scene, controller_config(noise=False), seed=seed)
+        plate = PlateCommander.create(scene.model, scene.data, scene_cfg.stewart, believed)
+        rt.observers.append(lambda r: plate.update(r.scene.data, r.time))
+        return cls(scene, rt, plate)
+
+    def settle_at(self, pos: np.ndarray, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Drive to the pose, hold SETTLE_S; (commanded strokes, true pos, true rot in the Stewart base frame)."""
+        require_pose(self.plate.geometry, pos, rot)
+        goal = transform(rot, pos)
+        self.rt.run(self.plate.move_to(self.scene.data, goal, self.rt.time, CAMPAIGN_SPEED) + SETTLE_S)
+        true_pos, true_rot = platform_pose(self.scene.model, self.scene.data, names.STEWART)
+        return self.plate.strokes(goal), true_pos, true_rot
+
+
+@dataclass(frozen=True)
+class CampaignResult:
+    """What one campaign gives: the measurements the identification sees, and (for scoring
+    only) the simulator's true poses in the frame the measurements live in."""
+
+    meas: StewartMeasurements | None
+    """Commanded strokes and measured poses of the measured poses; None for a scoring-only run."""
+    true_pos: np.ndarray
+    """(N, 3) true platform positions of every pose [m]."""
+    true_rot: np.ndarray
+    kept: np.ndarray
+    """Indices of the measured poses in the pose set (all of them, but for the stereo source)."""
+    skipped: tuple[tuple[int, str], ...] = ()
+    """(pose index, why) of every pose the instrument could not measure."""
+    registration_error: tuple[float, float] | None = None
+    """Stereo: the home registration's own error (position [m], angle [rad]), common to every
+    pose (a gauge: it cancels in the identification and the scoring)."""
+
+    @property
+    def position_error(self) -> np.ndarray:
+        """(kept, 3) measured minus true position [m]."""
+        return np.zeros((0, 3)) if self.meas is None else self.meas.pos - self.true_pos[self.kept]
+
+    @property
+    def angle_error(self) -> np.ndarray:
+        """(kept, 3) rotation vectors of the measured orientations relative to the true ones [rad]."""
+        if self.meas is None:
+            return np.zeros((0, 3))
+        rel = np.einsum("nij,nkj->nik", self.meas.rot, self.true_rot[self.kept])
+        return Rotation.from_matrix(rel).as_rotvec().reshape(-1, 3)
 
 
 def mocap(strokes: np.ndarray, true_pos: np.ndarray, true_rot: np.ndarray, noise: MocapNoise,

@@ -66,7 +66,7 @@ def test_optimal_poses_condition_the_identification_better_than_table3():
 @pytest.mark.parametrize("kwargs, needle", [
     ({"poses": "grid"}, "valid: table3, optimal, random"),
     ({"solvers": ("newton",)}, "valid: tls, lm, pso, all"),
-    ({"source": "laser"}, "valid: cell, kinematic"),
+    ({"source": "laser"}, "valid: cell, kinematic, stereo"),
     ({"n_poses": 3, "poses": "random"}, "valid 7..500"),
 ])
 def test_bad_calibration_config_names_the_choices(kwargs, needle):
