@@ -1,8 +1,9 @@
 """`serpar bench --episode`: wall time of the assembly task (issue 5).
 
 One hole cycle's wall and simulated time (from a short episode's records), the 36-hole
-episode estimated from it (set-up + 36 cycles; a real 36-hole run takes ~10 min on 2 cores,
-run it with `serpar run`), and the speed-up of 2 worker processes over 1 on the same episodes.
+episode estimated from it (set-up + 36 cycles: a lower bound, since the parts already seated
+wake with the moving platform and make later cycles dearer; time a real one with `serpar
+run`), and the speed-up of 2 worker processes over 1 on the same episodes.
 """
 
 from __future__ import annotations
