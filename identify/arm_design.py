@@ -11,7 +11,9 @@ socket.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,6 +27,7 @@ from sim.arm import Q_MAX, Q_MIN
 GENERIC_POSES = 64
 PER_SOCKET = 16
 IK_TOL_M = 1e-10
+IK_ATTEMPTS = 20
 
 
 def position_ik(chain: Chain, values: NDArray[np.float64], target: NDArray[np.float64],
@@ -46,15 +49,19 @@ def position_ik(chain: Chain, values: NDArray[np.float64], target: NDArray[np.fl
     return q
 
 
-def _consistent_sockets(chain: Chain, values: NDArray[np.float64], counts: NDArray[np.int64],
-                        rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+def consistent_sockets(chain: Any, values: NDArray[np.float64], counts: NDArray[np.int64],
+                       rng: np.random.Generator, forward_fn: Callable[..., NDArray[np.float64]] = forward,
+                       ik_fn: Callable[..., NDArray[np.float64]] = position_ik
+                       ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Joint angles (sum(counts), n) and socket ids: per socket a random reachable point, then
+    `count` IK solutions that reach it under the model (`forward_fn`/`ik_fn` of its form)."""
     lo, hi = np.asarray(Q_MIN), np.asarray(Q_MAX)
     q_all, ids = [], []
     for s, count in enumerate(counts):
-        target = forward(chain, values, rng.uniform(lo, hi)[None, :])[0, :3, 3]
+        target = forward_fn(chain, values, rng.uniform(lo, hi)[None, :])[0, :3, 3]
         found: list[NDArray[np.float64]] = []
-        for _ in range(20):
-            q = position_ik(chain, values, target, rng.uniform(lo, hi, size=(2 * count, len(lo))))
+        for _ in range(IK_ATTEMPTS):
+            q = ik_fn(chain, values, target, rng.uniform(lo, hi, size=(2 * count, len(lo))))
             found.extend(q[np.all(np.isfinite(q), axis=1)])
             if len(found) >= count:
                 break
@@ -76,7 +83,7 @@ def generic_design(model: ArmModel, meas: Measurements, x0: NDArray[np.float64],
     values = model.chain.values(dchain)
     if isinstance(meas, PointSet):
         counts = np.maximum(np.bincount(meas.point), PER_SOCKET)
-        q, point = _consistent_sockets(model.chain, values, counts, rng)
+        q, point = consistent_sockets(model.chain, values, counts, rng)
     else:
         q = rng.uniform(Q_MIN, Q_MAX, size=(max(meas.n_poses, GENERIC_POSES), len(Q_MIN)))
     tau = None

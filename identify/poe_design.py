@@ -15,15 +15,12 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.arm_design import IK_TOL_M, PER_SOCKET, generic_design
+from identify.arm_design import IK_TOL_M, PER_SOCKET, consistent_sockets, generic_design
 from identify.arm_measurements import Measurements, PointSet
 from identify.arm_model import ArmModel, chain_forward, chain_kinematics, layout
-from identify.errors import IdentificationError
 from identify.mdh import Chain
 from identify.poe_calibration import PoeChain
 from sim.arm import Q_MAX, Q_MIN
-
-IK_ATTEMPTS = 20
 
 
 def tool_ik(chain: Chain | PoeChain, values: NDArray[np.float64], target: NDArray[np.float64],
@@ -44,27 +41,6 @@ def tool_ik(chain: Chain | PoeChain, values: NDArray[np.float64], target: NDArra
     return q
 
 
-def _consistent_sockets(chain: Chain | PoeChain, values: NDArray[np.float64],
-                        counts: NDArray[np.int64], rng: np.random.Generator
-                        ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    lo, hi = np.asarray(Q_MIN), np.asarray(Q_MAX)
-    q_all, ids = [], []
-    for s, count in enumerate(counts):
-        target = chain_forward(chain, values, rng.uniform(lo, hi)[None, :])[0, :3, 3]
-        found: list[NDArray[np.float64]] = []
-        for _ in range(IK_ATTEMPTS):
-            q = tool_ik(chain, values, target, rng.uniform(lo, hi, size=(2 * count, len(lo))))
-            found.extend(q[np.all(np.isfinite(q), axis=1)])
-            if len(found) >= count:
-                break
-        else:
-            raise IdentificationError("could not build a generic point-consistency pose set "
-                                      "(inverse kinematics failed); check the tool offset")
-        q_all.append(np.asarray(found[:count]))
-        ids.append(np.full(count, s))
-    return np.vstack(q_all), np.concatenate(ids)
-
-
 def design_for(model: ArmModel, meas: Measurements, x0: NDArray[np.float64], seed: int = 0
                ) -> tuple[Measurements, NDArray[np.float64]]:
     """:func:`identify.arm_design.generic_design` for either form of ``model``."""
@@ -74,7 +50,7 @@ def design_for(model: ArmModel, meas: Measurements, x0: NDArray[np.float64], see
     lay = layout(model, meas)
     values = model.chain.values(lay.split(x0)[1])
     counts = np.maximum(np.bincount(meas.point), PER_SOCKET)
-    q, point = _consistent_sockets(model.chain, values, counts, rng)
+    q, point = consistent_sockets(model.chain, values, counts, rng, chain_forward, tool_ik)
     tau = None
     if meas.tau_gravity is not None:
         # the same rule as arm_design: random loads of the campaign's spread, zero where the
