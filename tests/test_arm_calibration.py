@@ -9,6 +9,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from arm_cal_support import HI, LO, TOOL, gravity_like_load, poses
 
 from identify.arm_calibration import calibrate, calibrate_gravity_aware, identifiability_of
 from identify.arm_design import position_ik
@@ -17,26 +18,13 @@ from identify.arm_model import ArmModel, initial_parameters, layout, predict
 from identify.errors import IdentificationError
 from identify.mdh import chain_frames, forward, panda_chain, pose_jacobian
 from identify.panda_data import load_panda_folder
-from sim.arm import Q_MAX, Q_MIN, mdh_forward_kinematics
+from sim.arm import mdh_forward_kinematics
 from tasks.arm_calibration_run import real_data_calibration, simulated_calibration
 from tasks.arm_truth import ArmPlant, TruthConfig, build_model, draw_errors, run_campaign
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "panda_1"
-TOOL = (0.01, 0.05, 0.12)
-LO, HI = np.asarray(Q_MIN) + 0.1, np.asarray(Q_MAX) - 0.1
 
 
-def _poses(n: int, seed: int) -> np.ndarray:
-    return np.random.default_rng(seed).uniform(LO, HI, size=(n, 7))
-
-
-def _tau(q: np.ndarray) -> np.ndarray:
-    """A smooth configuration-dependent load of the size of the Panda's gravity torques,
-    zero on joint 1 as for a level base."""
-    tau = np.column_stack([np.zeros(len(q)), 40 * np.sin(q[:, 1]), 5 * np.cos(q[:, 2]),
-                           20 * np.sin(q[:, 3]), 2 * np.sin(q[:, 4]), 3 * np.cos(q[:, 5]),
-                           0.5 * np.sin(q[:, 6])])
-    return tau
 
 
 def _truth(model: ArmModel, meas, seed: int) -> np.ndarray:
@@ -56,7 +44,7 @@ def _truth(model: ArmModel, meas, seed: int) -> np.ndarray:
 
 def test_mdh_chain_matches_sim_arm_and_its_jacobian_finite_differences():
     chain = panda_chain(TOOL)
-    q = _poses(20, 0)
+    q = poses(20, 0)
     ref = np.array([mdh_forward_kinematics(qq) for qq in q])
     ref[:, :3, 3] += np.einsum("nij,j->ni", ref[:, :3, :3], TOOL)
     assert np.abs(forward(chain, chain.values(), q) - ref).max() < 1e-12
@@ -76,10 +64,10 @@ def test_mdh_chain_matches_sim_arm_and_its_jacobian_finite_differences():
 
 
 def _position_set(model, x, q, sigma=15e-6, noise=0.0, seed=0):
-    lay = layout(model, PositionSet(q, np.zeros((len(q), 3)), tau_gravity=_tau(q)))
-    p = predict(model, x, lay, q, _tau(q))[:, :3, 3]
+    lay = layout(model, PositionSet(q, np.zeros((len(q), 3)), tau_gravity=gravity_like_load(q)))
+    p = predict(model, x, lay, q, gravity_like_load(q))[:, :3, 3]
     p = p + np.random.default_rng(seed).normal(size=p.shape) * noise
-    return PositionSet(q, p, sigma, _tau(q))
+    return PositionSet(q, p, sigma, gravity_like_load(q))
 
 
 def _pose_set(model, x, q):
@@ -116,7 +104,7 @@ def test_noise_free_data_recover_the_identifiable_parameters_to_1e_9(kind):
         meas, centres = _point_set(model, errors, (20, 20, 20), seed=7)
         x = np.r_[centres.ravel(), errors]
     else:
-        q = _poses(60, 2)
+        q = poses(60, 2)
         design = _position_set(model, initial_parameters(model, PositionSet(
             q, np.zeros((60, 3)))), q)
         x = _truth(model, design, seed=3)
@@ -129,7 +117,7 @@ def test_noise_free_data_recover_the_identifiable_parameters_to_1e_9(kind):
 
 def test_noisy_estimates_lie_within_3_sigma_of_the_estimator_covariance():
     model = ArmModel(panda_chain(TOOL), gravity=True)
-    q = _poses(150, 8)
+    q = poses(150, 8)
     design = _position_set(model, np.zeros(layout(model, PositionSet(
         q, np.zeros((150, 3)))).size), q)
     x = _truth(model, design, seed=9)
@@ -142,8 +130,8 @@ def test_noisy_estimates_lie_within_3_sigma_of_the_estimator_covariance():
 
 def test_identifiability_report_names_the_three_kinds():
     model = ArmModel(panda_chain(TOOL), gravity=True)
-    q = _poses(80, 11)
-    tau = _tau(q)
+    q = poses(80, 11)
+    tau = gravity_like_load(q)
     tau[:, 6] = 0.0  # deliberately: a joint gravity never loads has an unidentifiable compliance
     rep = identifiability_of(model, PositionSet(q, np.zeros((80, 3)), tau_gravity=tau))
     assert rep.kind("c7") == "non-functional" and rep.kind("c1") == "non-functional"
@@ -208,7 +196,7 @@ def test_gravity_aware_does_not_overfit_a_rigid_plant():
 
 def test_bad_campaigns_fail_with_what_is_missing():
     model = ArmModel(panda_chain(TOOL))
-    q = _poses(40, 12)
+    q = poses(40, 12)
     good = _position_set(model, np.zeros(layout(model, PositionSet(q, np.zeros((40, 3)))).size),
                          q)
     with pytest.raises(IdentificationError, match=r"5 poses give 15 equations for 31 .* 11 poses"):

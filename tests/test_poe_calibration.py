@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from arm_cal_support import HI, LO, TOOL, gravity_like_load, poses
 
 from identify import poe
 from identify.arm_calibration import calibrate, identifiability_of
@@ -37,24 +38,12 @@ from identify.panda_data import load_panda_folder
 from identify.poe_calibration import panda_poe_chain, poe_kinematics
 from identify.poe_design import tool_ik
 from serpar.cmd_calibrate_arm import cmd_calibrate_arm
-from sim.arm import Q_MAX, Q_MIN
 from tasks.arm_calibration_run import real_data_calibration, simulated_calibration
 from tasks.arm_truth import TruthConfig, run_campaign
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "panda_1"
-TOOL = (0.01, 0.05, 0.12)
-LO, HI = np.asarray(Q_MIN) + 0.1, np.asarray(Q_MAX) - 0.1
 
 
-def _poses(n: int, seed: int) -> np.ndarray:
-    return np.random.default_rng(seed).uniform(LO, HI, size=(n, 7))
-
-
-def _tau(q: np.ndarray) -> np.ndarray:
-    """A configuration-dependent load of the size of the Panda's gravity torques."""
-    return np.column_stack([np.zeros(len(q)), 40 * np.sin(q[:, 1]), 5 * np.cos(q[:, 2]),
-                            20 * np.sin(q[:, 3]), 2 * np.sin(q[:, 4]), 3 * np.cos(q[:, 5]),
-                            0.5 * np.sin(q[:, 6])])
 
 
 def _truth(model: ArmModel, meas, seed: int) -> np.ndarray:
@@ -71,9 +60,9 @@ def _truth(model: ArmModel, meas, seed: int) -> np.ndarray:
 
 
 def _position_set(model, x, q, noise=0.0, seed=0):
-    p = predict(model, x, layout(model, PositionSet(q, np.zeros((len(q), 3)))), q, _tau(q))
+    p = predict(model, x, layout(model, PositionSet(q, np.zeros((len(q), 3)))), q, gravity_like_load(q))
     noisy = p[:, :3, 3] + np.random.default_rng(seed).normal(size=(len(q), 3)) * noise
-    return PositionSet(q, noisy, 15e-6, _tau(q))
+    return PositionSet(q, noisy, 15e-6, gravity_like_load(q))
 
 
 def _point_set(model, chain_errors, counts, seed):
@@ -104,7 +93,7 @@ def _fd_twist(f, h=1e-6):
 
 
 def test_poe_chain_is_the_mdh_arm_and_its_jacobian_matches_finite_differences():
-    chain, q = panda_poe_chain(TOOL), _poses(20, 0)
+    chain, q = panda_poe_chain(TOOL), poses(20, 0)
     mdh = panda_chain(TOOL)
     assert np.abs(chain_forward(chain, chain.values(), q)
                   - chain_forward(mdh, mdh.values(), q)).max() < 1e-12
@@ -131,7 +120,7 @@ def test_noise_free_data_recover_the_identifiable_poe_parameters_to_1e_9(kind):
         meas, centres = _point_set(model, errors, (20, 20, 20), seed=7)
         x = np.r_[centres.ravel(), errors]
     else:
-        q = _poses(60, 2)
+        q = poses(60, 2)
         design = _position_set(model, np.zeros(layout(model, PositionSet(
             q, np.zeros((60, 3)))).size), q)
         x = _truth(model, design, seed=3)
@@ -148,7 +137,7 @@ def test_noise_free_data_recover_the_identifiable_poe_parameters_to_1e_9(kind):
 
 def test_noisy_poe_estimates_lie_within_3_sigma_of_the_estimator_covariance():
     model = ArmModel(panda_poe_chain(TOOL), gravity=True)
-    q = _poses(150, 8)
+    q = poses(150, 8)
     design = _position_set(model, np.zeros(layout(model, PositionSet(
         q, np.zeros((150, 3)))).size), q)
     x = _truth(model, design, seed=9)
@@ -160,8 +149,8 @@ def test_noisy_poe_estimates_lie_within_3_sigma_of_the_estimator_covariance():
 
 
 def test_poe_identifiability_report_names_the_three_kinds_and_the_gauge():
-    q = _poses(80, 11)
-    tau = _tau(q)
+    q = poses(80, 11)
+    tau = gravity_like_load(q)
     tau[:, 6] = 0.0  # deliberately: a joint gravity never loads has an unidentifiable compliance
     meas = PositionSet(q, np.zeros((80, 3)), tau_gravity=tau)
     rep = identifiability_of(ArmModel(panda_poe_chain(TOOL), gravity=True), meas)
@@ -186,7 +175,7 @@ def test_poe_identifiability_report_names_the_three_kinds_and_the_gauge():
 
 def test_a_campaign_that_never_turns_joint_7_flags_its_twist_as_unidentifiable():
     model = ArmModel(panda_poe_chain(TOOL))
-    q = _poses(60, 13)
+    q = poses(60, 13)
     q[:, 6] = 0.4          # deliberately: joint 7's axis is then just part of the tool
     meas = _position_set(model, np.zeros(layout(model, PositionSet(
         q, np.zeros((60, 3)))).size), q)
@@ -223,7 +212,7 @@ def test_poe_and_mdh_reach_the_same_verification_accuracy_on_the_simulated_arm()
 
 def test_too_few_poses_for_the_poe_model_fail_in_one_line():
     model = ArmModel(panda_poe_chain(TOOL))
-    q = _poses(5, 12)
+    q = poses(5, 12)
     meas = _position_set(model, np.zeros(layout(model, PositionSet(
         q, np.zeros((5, 3)))).size), q)
     with pytest.raises(IdentificationError) as err:
