@@ -20,6 +20,7 @@ from sim.cameras import DEFAULT_PAIRS, SENSOR_PIXELS, StereoPairConfig, add_ster
 from sim.conductor import ConductorConfig, build_conductor_spec
 from sim.errors import ConfigError
 from sim.physics import PhysicsConfig
+from sim.seat_lock import add_seat_locks
 from sim.stewart import StewartConfig, build_stewart_spec, home_strokes
 from sim.tolerances import DISTRIBUTIONS, DrawnDiameters, draw_diameters
 from sim.tray import TrayConfig, build_tray_spec
@@ -144,6 +145,7 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
         part = build_conductor_spec(diameters.journals[k], diameters.bodies[k], cfg.conductor, cfg.physics)
         px, py = pockets[k]
         spec.attach(part, prefix=names.conductor(k), frame=world.add_frame(pos=[tx + px, ty + py, top]))
+    add_seat_locks(spec, cfg.n_conductors)
     for pair in cfg.stereo_pairs:
         add_stereo_pair(spec, pair)
     return spec, diameters

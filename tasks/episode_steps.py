@@ -15,6 +15,7 @@ import numpy as np
 
 from controllers.arm_controller import ControlLaw
 from sim.scene import SceneConfig
+from sim.seat_lock import lock_seated
 from sim.tolerances import BODY_H6
 from tasks.cell_runtime import CellRuntime
 from tasks.episode_config import EpisodeConfig, Outcome
@@ -240,6 +241,8 @@ class HoleCycle:
         result = insert(rt, seat, HAND_DOWN, approach, self.law, self.conductor, self.hole, cfg, follow)
         self._enter("release")
         release(rt, body)
+        if result.outcome is Outcome.SUCCESS:  # scored: from here the part rides with the plate
+            lock_seated(rt.scene.model, d, self.conductor)
         diam = rt.scene.diameters
         clearance = 1e6 * (diam.holes[self.hole] - diam.journals[self.conductor])
         return CycleResult(self.hole, self.conductor, result.outcome, result.reason, result.peak_force_n,
