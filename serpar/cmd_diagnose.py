@@ -15,7 +15,13 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("recording", help="a recording folder (docs/recording.md) or a "
                                      "panda_1-layout folder")
     p.add_argument("--report", metavar="OUT.html",
-                   help="write an HTML report (plots embedded) and OUT.model.json beside it")
+                   help="write an HTML report (plots embedded) and OUT.model.json beside it "
+                        "(Stewart geometry or encoder offsets: also OUT.stewart_params.json, "
+                        "for serpar run's stewart_calibration)")
+    p.add_argument("--model", metavar="M.model.json",
+                   help="diagnose against a previous diagnosis's model file: its effects are "
+                        "fixed in the nominal prediction (default: the nominal arm); the "
+                        "written model is M's updated by what this recording shows")
     p.add_argument("--seed", type=int, default=0, help="seed of the train/held-out split "
                                                        "where the recording does not fix it")
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -41,7 +47,24 @@ def print_diagnosis(diag, source: str) -> None:  # type: ignore[no-untyped-def]
     print(f"verdict: {diag.verdict}")
 
 
+def plant_summary(model: dict) -> dict[str, list[str]] | None:  # type: ignore[type-arg]
+    """What `serpar run` (EpisodeConfig.plant_model) will apply of a written arm model, and
+    what it cannot; None for a model of another domain."""
+    from identify.diagnosis.model_file import parse_model
+    from identify.diagnosis.plant_model import KNOWN_EFFECTS, applied_parts, arm_plant_changes
+    from sim.errors import ConfigError
+
+    if not all(e in KNOWN_EFFECTS for e in model["effects"]):
+        return None
+    try:
+        changes = arm_plant_changes(parse_model(model, "the model"))
+    except ConfigError as exc:  # the diagnosis stands; only its use as a plant fails
+        return {"applied": [], "not_applied": [f"not usable as a plant model: {exc}"]}
+    return {"applied": applied_parts(changes), "not_applied": list(changes.not_applied)}
+
+
 def cmd_diagnose(args: argparse.Namespace) -> int:
+    import dataclasses
     import sys
 
     from identify.diagnosis.choose import family_from_recording, load_for_diagnosis
@@ -49,6 +72,12 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     rec = load_for_diagnosis(args.recording)
     family = family_from_recording(rec)
+    prior = None
+    if args.model:
+        from identify.diagnosis.model_file import read_model_file
+        from identify.diagnosis.prior import PriorFamily
+
+        family = prior = PriorFamily(family, read_model_file(args.model))
     bar = progress(total=0, desc="diagnose", enabled=sys.stderr.isatty() and not args.json)
 
     def step(msg: str) -> None:
@@ -57,18 +86,33 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     diag = diagnose(family, args.seed, report=step)
     bar.close()
+    if prior is not None:  # the written model: M's effects, corrected, plus the new ones
+        diag = dataclasses.replace(diag, model=prior.combined_model(diag.model))
+    plant = plant_summary({"source": str(args.recording), **diag.model})
     paths = None
     if args.report:
         from identify.diagnosis.report_html import write_report
 
-        paths = write_report(diag, Path(args.report), str(args.recording))
+        paths = write_report(diag, Path(args.report), str(args.recording), family)
     if args.json:
         out = diag.as_dict()
         if paths:
             out["report"], out["model_file"] = str(paths[0]), str(paths[1])
+            out["exported_files"] = [str(p) for p in paths[2]]
+        if prior is not None:
+            out["prior_model"], out["fixed_effects"] = args.model, list(prior.fixed)
+        out["plant"] = plant
         print_json(out)
     else:
+        if prior is not None:
+            print(f"against {args.model}: {', '.join(prior.fixed) or 'no effects'} fixed at its "
+                  "values (a finding on one of them is a correction)")
         print_diagnosis(diag, str(args.recording))
         if paths:
-            print(f"report: {paths[0]}   model: {paths[1]}")
+            print(f"report: {paths[0]}   model: {paths[1]}"
+                  + "".join(f"   for serpar run: {p}" for p in paths[2]))
+        if plant is not None and diag.model["effects"]:
+            print("as a plant model (`serpar run`, plant_model:): applies "
+                  f"{', '.join(plant['applied']) or 'nothing'}"
+                  + "".join(f"\n  warning: {n}" for n in plant["not_applied"]))
     return 0

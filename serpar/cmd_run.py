@@ -14,7 +14,9 @@ from serpar.output import progress, table
 def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="assembly episodes: the six steps for every hole, outcomes and "
                                    "success rate")
-    p.add_argument("--config", help="episode config YAML (keys of tasks.episode_config.EpisodeConfig)")
+    p.add_argument("--config", help="episode config YAML (keys of tasks.episode_config.EpisodeConfig; "
+                                    "plant_model: a `serpar diagnose` model file gives the simulated "
+                                    "arm the physics it found)")
     p.add_argument("--episodes", type=int, default=1, help="number of episodes, consecutive seeds (default 1)")
     p.add_argument("--holes", type=int, help="holes to fill per episode, 1..36 (default: the config's, 36)")
     p.add_argument("--seed", type=int, help="seed of the first episode (default: the config's, 0)")
@@ -47,6 +49,11 @@ def episode_config(args: argparse.Namespace):
         from tasks.stewart_params import load_stewart_parameters
 
         load_stewart_parameters(cfg.calibration_file)
+    if cfg.plant_model is not None:  # what the simulated arm gets, and what it cannot take
+        from identify.diagnosis.plant_model import arm_plant_from_file, plant_report
+
+        for line in plant_report(arm_plant_from_file(cfg.plant_model)):
+            print(line, file=sys.stderr)
     if args.episodes < 1:
         raise ConfigError(f"--episodes {args.episodes}: must be >= 1")
     if args.workers < 1:

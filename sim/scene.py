@@ -14,6 +14,7 @@ import numpy as np
 
 from sim import names
 from sim.arm import ACTUATOR_NAMES, HOME_Q, JOINT_NAMES, PAD_GEOMS, build_arm_spec
+from sim.arm_plant import ArmPlantChanges, apply_arm_plant
 from sim.baseplate import BaseplateConfig, build_baseplate_spec
 from sim.calibration_board import CheckerboardConfig, add_board
 from sim.cameras import DEFAULT_PAIRS, SENSOR_PIXELS, StereoPairConfig, add_stereo_pair
@@ -51,6 +52,10 @@ class SceneConfig:
     arm controllers do not model; () = frictionless (the nominal model)."""
     calibration_board: CheckerboardConfig | None = None
     """A checkerboard mounted on the hand for camera calibration (None: the working gripper only)."""
+    arm_plant: ArmPlantChanges | None = None
+    """The arm's physics beyond the nominal MJCF, from a diagnosis of the real cell
+    (``EpisodeConfig.plant_model``; sim/arm_plant.py). Its joint friction, when it sets one,
+    replaces ``arm_joint_friction``."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.seed, int) or isinstance(self.seed, bool):
@@ -58,6 +63,9 @@ class SceneConfig:
         friction = self.arm_joint_friction
         if friction and (len(friction) != len(JOINT_NAMES) or not all(0 <= f <= 20 for f in friction)):
             raise ConfigError(f"arm_joint_friction {friction}: () or {len(JOINT_NAMES)} values in 0..20 N m")
+        if self.arm_plant is not None and not isinstance(self.arm_plant, ArmPlantChanges):
+            raise ConfigError("arm_plant comes from a diagnosis model file (EpisodeConfig."
+                              f"plant_model), not a {type(self.arm_plant).__name__}")
         if not 0 <= self.n_conductors <= self.tray.n_pockets:
             raise ConfigError(f"n_conductors={self.n_conductors}: valid 0..{self.tray.n_pockets} (tray pockets)")
         if self.tolerance_distribution not in DISTRIBUTIONS:
@@ -123,6 +131,8 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
     arm = build_arm_spec()
     for joint, friction in zip(JOINT_NAMES, cfg.arm_joint_friction):
         arm.joint(joint).frictionloss = friction
+    if cfg.arm_plant is not None:  # after the nominal friction: a diagnosed one replaces it
+        apply_arm_plant(arm, cfg.arm_plant, cfg.physics.timestep)
     spec.attach(arm, prefix=names.ARM, frame=world.add_frame(pos=[0, 0, 0]))
     for pad in PAD_GEOMS:
         # Friction is a damper on slip velocity with rate 2/timeconst: a held part slides along the
@@ -174,7 +184,18 @@ class Scene:
         self.data.ctrl[self.leg_actuators] = home_strokes(self.config.stewart)
         mujoco.mj_forward(self.model, self.data)
         self.gravity_hold_arm()
+        self._hold_delayed_commands()
         mujoco.mj_forward(self.model, self.data)  # sensors (joint torques) see the held arm
+
+    def _hold_delayed_commands(self) -> None:
+        """A delayed arm actuator (``ArmPlantChanges.actuation_delay``) acts on its command
+        history: fill it with the holding torque, else the arm falls for the delay's length
+        after every reset."""
+        for act in self.arm_actuators:
+            n = int(self.model.actuator_history[act, 0])
+            if n:
+                mujoco.mj_initCtrlHistory(self.model, self.data, int(act), None,
+                                          np.full((n, 1), self.data.ctrl[act]))
 
     def gravity_hold_arm(self) -> None:
         """Arm motor torques = gravity + Coriolis bias (needs an up-to-date qfrc_bias)."""

@@ -12,6 +12,7 @@ import numpy as np
 
 from assets import asset_path
 from sim.arm import PANDA_COULOMB_FRICTION
+from sim.arm_plant import ArmPlantChanges
 from sim.errors import ConfigError
 from sim.scene import SceneConfig
 from sim.stewart import StewartConfig
@@ -95,6 +96,10 @@ class EpisodeConfig:
     camera_width: int = 2048
     damage_force_n: float = 20.0
     hole_time_limit_s: float = 10.0
+    plant_model: str | None = None
+    """Path of a diagnosis model file (``serpar diagnose --report``'s ``<stem>.model.json``): the
+    simulated arm gets the physics that diagnosis found (identify/diagnosis/plant_model.py; its
+    joint friction, if any, replaces arm_friction). None = the nominal arm."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.seed, int) or isinstance(self.seed, bool):
@@ -119,6 +124,8 @@ class EpisodeConfig:
                               f"{', '.join(CALIBRATIONS)} or the path of a parameters file")
         if self.calibration_file is not None and not self.stewart_correction:
             raise ConfigError("stewart_calibration is a file but stewart_correction is off: it would be unused")
+        if self.plant_model is not None:
+            _arm_plant(self.plant_model)  # a missing or bad file fails here, not in an episode
 
     @property
     def calibration_file(self) -> str | None:
@@ -126,13 +133,26 @@ class EpisodeConfig:
         return None if self.stewart_calibration in CALIBRATIONS else self.stewart_calibration
 
 
+def _arm_plant(path: str | None) -> ArmPlantChanges | None:
+    if path is None:
+        return None
+    if not isinstance(path, str) or not path:
+        raise ConfigError(f"plant_model {path!r}: the path of a diagnosis model file, or null")
+    from identify.diagnosis.plant_model import arm_plant_from_file
+
+    return arm_plant_from_file(path)
+
+
 def scene_config(cfg: EpisodeConfig) -> SceneConfig:
-    """The cell of an episode: its seed's tolerance draw, the hidden Stewart errors and the
-    arm's joint friction."""
+    """The cell of an episode: its seed's tolerance draw, the hidden Stewart errors, the
+    arm's joint friction and the diagnosed arm plant."""
     friction = tuple(cfg.arm_friction * f for f in PANDA_COULOMB_FRICTION) if cfg.arm_friction else ()
+    plant = _arm_plant(cfg.plant_model)
+    if plant is not None and plant.frictionloss:
+        friction = ()  # a diagnosis fits the total dry friction against a frictionless arm
     return SceneConfig(seed=cfg.seed, tolerance_distribution=cfg.tolerance_distribution,
                        stewart=StewartConfig(joint_errors=cfg.hidden_errors.draw(cfg.seed)),
-                       arm_joint_friction=friction)
+                       arm_joint_friction=friction, arm_plant=plant)
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
