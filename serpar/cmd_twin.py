@@ -15,10 +15,12 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                     "(truth in answer.json)")
     p.add_argument("--effect", required=True,
                    help="an effect name (serpar twin --effect list shows them) or none")
-    p.add_argument("--domain", help="arm_static or arm_dynamics (needed only with none; "
-                                    "default arm_static)")
+    p.add_argument("--domain", help="arm_static, arm_dynamics or stewart (needed only with "
+                                    "none; default arm_static)")
     p.add_argument("--magnitude", type=float,
-                   help="size of the effect (see the domain's twin module; default 1)")
+                   help="size of the effect (units per domain twin module, e.g. "
+                        "tasks/twin_stewart.py: K, m/N, m or x Table 5; default: its default "
+                        "size)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--out", required=False, help="output folder (recording + answer.json)")
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -33,7 +35,7 @@ def cmd_twin(args: argparse.Namespace) -> int:
 
     if args.effect == "list":
         table = effects()
-        print("none (either domain), " + ", ".join(f"{e} ({d})" for e, d in table.items()))
+        print("none (any domain), " + ", ".join(f"{e} ({d})" for e, d in table.items()))
         return 0
     if not args.out:
         raise ConfigError("--out DIR is required (the recording goes there, the truth to "

@@ -17,6 +17,7 @@ from sim.recording import Recording
 DOMAINS: dict[str, str] = {
     "arm_static": "tasks.twin_arm_static",
     "arm_dynamics": "tasks.twin_arm_dynamics",
+    "stewart": "tasks.twin_stewart",
 }
 DEFAULT_RANGE = (0.5, 2.0)
 

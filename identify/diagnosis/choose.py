@@ -9,8 +9,12 @@ from identify.errors import IdentificationError
 from sim.recording import Recording, read_recording
 
 DYNAMICS_CHANNELS = tuple(f"q{j}" for j in range(1, 8)) + tuple(f"tau_J{j}" for j in range(1, 8))
+STEWART_PREFIXES = ("leg", "platform_")
+"""A recording with any channel starting so is meant for the Stewart family, which then names
+whichever of its channels are missing."""
 WHAT = ("a measurements table (q1..q7 with x/y/z or socket: a static calibration set), or arm "
-        "signals q1..7 and tau_J1..7 (a time series), or a panda_1-layout folder")
+        "signals q1..7 and tau_J1..7 (a time series), or Stewart signals leg_cmd1..6, leg1..6, "
+        "platform_x/y/z/qw/qx/qy/qz (rest holds of the platform), or a panda_1-layout folder")
 
 
 def is_panda_folder(path: Path) -> bool:
@@ -34,7 +38,8 @@ def load_for_diagnosis(path: str | Path) -> Recording:
 
 def family_from_recording(rec: Recording) -> Family:
     """The static arm family when the recording has measurements, else the arm-dynamics
-    family when it has the arm's joint signals; else one line saying what is needed."""
+    family when it has the arm's joint signals, else the Stewart family when it has Stewart
+    leg or platform channels; else one line saying what is needed."""
     if rec.measurements is not None and rec.measurements.num_rows > 0:
         from identify.diagnosis.arm_static import family_from_data
         from identify.diagnosis.arm_static_data import static_data
@@ -46,6 +51,11 @@ def family_from_recording(rec: Recording) -> Family:
         from identify.diagnosis.arm_dynamics import family_from_recording as dynamics_family
 
         return dynamics_family(rec)
+    if rec.signals.num_rows > 0 and any(c.startswith(STEWART_PREFIXES) for c in cols):
+        # --- Stewart platform rest holds (identify/diagnosis/stewart.py)
+        from identify.diagnosis.stewart import family_from_recording as stewart_family
+
+        return stewart_family(rec)
     raise IdentificationError(f"the recording holds nothing diagnosable; needs {WHAT} "
                               f"(it has: {', '.join(sorted(cols)) or 'no channels'}, "
                               f"{rec.signals.num_rows} samples, "

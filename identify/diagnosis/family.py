@@ -6,12 +6,18 @@ any subset of rows, given the parameters of the always-fitted baseline and of wh
 candidate :class:`Effect` s are active. The engine (:mod:`identify.diagnosis.select`) never
 sees physics, only these residuals, so every domain (static arm measurements, arm time
 series, Stewart legs, episodes) is diagnosed by the same staged functions.
+
+Optional hook: a family whose domain has a model file of its own (the Stewart parameters
+that ``serpar run`` reads) may define ``export(params, stem) -> list[Path]``, writing the
+final fit's parameters (block name -> values) to files named ``<stem>.<what>``; see
+:func:`export_model_files`. Families without it are untouched.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -118,3 +124,16 @@ class Family(Protocol):
     def locate(self, rows: NDArray[np.int64], whitened: NDArray[np.float64]) -> list[LocateRow]:
         """The "where" table of the given rows' whitened residual."""
         ...
+
+
+def export_model_files(family: object, model: Mapping[str, object], stem: Path) -> list[Path]:
+    """The family's own model files for the final fit (``model``: ``Diagnosis.model``), or
+    none when the family has no ``export`` hook. A wrapper that keeps its family as ``inner``
+    (identify/diagnosis/prior.py) exports through it: ``model`` is then the combined one."""
+    hook = getattr(family, "export", None) or getattr(getattr(family, "inner", None), "export", None)
+    if not callable(hook):
+        return []
+    blocks = model.get("params", {})
+    params = {name: np.asarray(block["values"], float)  # type: ignore[index]
+              for name, block in blocks.items()}  # type: ignore[union-attr]
+    return [Path(p) for p in hook(params, stem)]

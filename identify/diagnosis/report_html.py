@@ -1,6 +1,7 @@
 """The HTML report of a diagnosis: verdict, where (table + plot), what (ranked effects with
 evidence and parameters), before/after held-out residual plots (PNG embedded as base64), and
-the updated model written as JSON beside it."""
+the updated model written as JSON beside it (plus the family's own model files, when its
+domain has any: the Stewart parameters ``serpar run`` reads)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from identify.diagnosis.family import LocateRow
+from identify.diagnosis.family import LocateRow, export_model_files
 from identify.diagnosis.result import Diagnosis
 
 
@@ -79,12 +80,15 @@ def _table(headers: list[str], rows: list[list[object]]) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
-def write_report(diag: Diagnosis, path: str | Path, source: str) -> tuple[Path, Path]:
-    """Write the HTML report and ``<stem>.model.json``; returns both paths."""
+def write_report(diag: Diagnosis, path: str | Path, source: str, family: object = None
+                 ) -> tuple[Path, Path, list[Path]]:
+    """Write the HTML report, ``<stem>.model.json`` and the files of the family's ``export``
+    hook (``<stem>.<what>``, none without a hook); returns the three."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     model_path = out.with_name(out.stem + ".model.json")
     model_path.write_text(json.dumps({"source": source, **diag.model}, indent=2))
+    exported = export_model_files(family, diag.model, out.with_name(out.stem))
     where = _table(["channel", "split by", "label", "n", "RMS/sigma", "p (chi-square)", "flag"],
                    [[r.channel, r.group, r.label, r.n, f"{r.rms_whitened:.3g}",
                      f"{r.p_value:.2g}", "BEYOND NOISE" if r.flagged else ""]
@@ -110,6 +114,13 @@ explained share of the excess held-out residual: {100 * diag.explained:.1f} %.</
 <h2>Where</h2><img src="data:image/png;base64,{_where_plot(diag.locate_before, diag.locate_after)}">{where}
 <h2>Held-out residual before and after</h2><img src="data:image/png;base64,{_heldout_plot(diag)}">
 <h2>Evidence: every candidate tried</h2>{cands}
-<p>Updated model: <code>{html.escape(model_path.name)}</code></p></body></html>"""
+<p>Updated model: <code>{html.escape(model_path.name)}</code>{_exported(exported)}</p></body></html>"""
     out.write_text(doc)
-    return out, model_path
+    return out, model_path, exported
+
+
+def _exported(paths: list[Path]) -> str:
+    if not paths:
+        return ""
+    names = ", ".join(f"<code>{html.escape(p.name)}</code>" for p in paths)
+    return f"; for <code>serpar run</code>: {names}"
