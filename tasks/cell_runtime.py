@@ -8,6 +8,8 @@ servos in MuJoCo itself. Motion primitives (`tasks.motions`) drive it.
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -133,7 +135,8 @@ class CellRuntime:
             kinds = [mujoco.mjtWarning(i).name for i in np.flatnonzero(counts)]
             self._warnings = warnings
             raise UnstableSimulation(f"MuJoCo warning ({', '.join(kinds)}) at t = {self.time:.3f} s")
-        if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
+        # One reduction per array: a NaN or inf anywhere makes the sum non-finite.
+        if not (math.isfinite(float(d.qpos.sum())) and math.isfinite(float(d.qvel.sum()))):
             raise UnstableSimulation(f"NaN or infinite state at t = {self.time:.3f} s")
         dof = int(np.argmax(np.abs(d.qvel)))
         if abs(d.qvel[dof]) > MAX_SPEED:
