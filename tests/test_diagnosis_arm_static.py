@@ -8,11 +8,11 @@ from dataclasses import replace
 import numpy as np
 import pyarrow as pa
 import pytest
+from diagnosis_support import RMS_TARGET, run_trials
 
 from identify.diagnosis.arm_static import family_from_data
 from identify.diagnosis.arm_static_data import static_data, to_recording
 from identify.diagnosis.choose import family_from_recording
-from identify.diagnosis.select import diagnose
 from identify.errors import IdentificationError
 from sim.recording import Recording, RecordingMeta
 from tasks.twin_arm_static import make_twin
@@ -20,17 +20,12 @@ from tasks.twin_arm_static import make_twin
 TRIALS = {"none": 0, "geometric": 0, "joint_compliance": 3, "backlash": 0, "encoder": 0,
           "thermal_drift": 0}
 """Effect -> twin seed (default magnitude): the fixed, seeded set of concealed trials."""
-RMS_TARGET = 1.5
 
 
 @pytest.fixture(scope="module")
 def results() -> dict:
-    out = {}
-    for effect, seed in TRIALS.items():
-        rec, answer = make_twin(None if effect == "none" else effect, None, seed)
-        family = family_from_recording(rec)
-        out[effect] = (family, diagnose(family, seed), answer)
-    return out
+    return {effect: (family, diag, answer)
+            for effect, (_, answer, family, diag) in run_trials(make_twin, TRIALS).items()}
 
 
 @pytest.mark.parametrize("effect", [e for e in TRIALS if e != "none"])

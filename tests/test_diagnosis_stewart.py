@@ -10,12 +10,13 @@ import json
 import numpy as np
 import pyarrow as pa
 import pytest
+from diagnosis_support import RMS_TARGET, run_trials
 
 from controllers.stewart_kinematics import forward_kinematics, inverse_kinematics
 from identify.diagnosis.choose import family_from_recording
 from identify.diagnosis.family import Family
 from identify.diagnosis.fit import fit_model
-from identify.diagnosis.select import diagnose, earns
+from identify.diagnosis.select import earns
 from identify.diagnosis.stewart import AXES, StewartFamily
 from identify.diagnosis.stewart_effects import geometry_flat_index
 from identify.diagnosis.stewart_model import nominal_load, static_leg_forces
@@ -34,17 +35,11 @@ pytestmark = pytest.mark.xdist_group("stewart_twins")  # one worker builds the t
 TRIALS = {"none": 0, "stewart_geometry": 0, "leg_thermal_drift": 0, "leg_compliance": 0,
           "leg_encoder_offset": 0}
 """Effect -> twin seed (default magnitude): the fixed, seeded set of concealed trials."""
-RMS_TARGET = 1.5
 
 
 @pytest.fixture(scope="module")
 def results() -> dict:
-    out = {}
-    for effect, seed in TRIALS.items():
-        rec, answer = make_twin(None if effect == "none" else effect, None, seed)
-        family = family_from_recording(rec)
-        out[effect] = (rec, answer, family, diagnose(family, seed))
-    return out
+    return run_trials(make_twin, TRIALS)
 
 
 def test_family_implements_the_contract(results) -> None:
