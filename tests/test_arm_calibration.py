@@ -9,7 +9,15 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
-from arm_cal_support import HI, LO, TOOL, gravity_like_load, poses
+from arm_cal_support import (
+    TOOL,
+    assert_noisy_estimates_within_3_sigma,
+    gravity_like_load,
+    point_set,
+    poses,
+    position_set,
+    truth,
+)
 
 from identify.arm_calibration import calibrate, calibrate_gravity_aware, identifiability_of
 from identify.arm_design import position_ik
@@ -25,21 +33,6 @@ from tasks.arm_truth import ArmPlant, TruthConfig, build_model, draw_errors, run
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "panda_1"
 
 
-
-
-def _truth(model: ArmModel, meas, seed: int) -> np.ndarray:
-    """Errors on the identifiable parameters only (the others are not recoverable)."""
-    rep = identifiability_of(model, meas)
-    x = initial_parameters(model, meas)
-    rng = np.random.default_rng(seed)
-    for i in rep.independent:
-        name = rep.names[i]
-        if name.startswith("socket"):
-            continue
-        scale = 1e-4 if name.startswith("c") else (5e-4 if ".t" in name or name[-2:] in (
-            ".a", ".d") else 1e-3)
-        x[i] += rng.normal() * scale
-    return x
 
 
 def test_mdh_chain_matches_sim_arm_and_its_jacobian_finite_differences():
@@ -63,52 +56,26 @@ def test_mdh_chain_matches_sim_arm_and_its_jacobian_finite_differences():
         assert np.abs(dw - jac[:, 3:, e]).max() < 1e-8, chain.names[e]
 
 
-def _position_set(model, x, q, sigma=15e-6, noise=0.0, seed=0):
-    lay = layout(model, PositionSet(q, np.zeros((len(q), 3)), tau_gravity=gravity_like_load(q)))
-    p = predict(model, x, lay, q, gravity_like_load(q))[:, :3, 3]
-    p = p + np.random.default_rng(seed).normal(size=p.shape) * noise
-    return PositionSet(q, p, sigma, gravity_like_load(q))
-
-
 def _pose_set(model, x, q):
     lay = layout(model, PositionSet(q, np.zeros((len(q), 3))))
     t = predict(model, x, lay, q)
     return PoseSet(q, t[:, :3, 3], t[:, :3, :3])
 
 
-def _point_set(model, chain_errors, counts, seed):
-    """Consistent sockets of a known true chain: each socket's poses reach one point."""
-    rng = np.random.default_rng(seed)
-    values = model.chain.values(chain_errors)
-    q, ids, centres = [], [], []
-    for s, n in enumerate(counts):
-        target = forward(model.chain, values, rng.uniform(LO, HI)[None])[0, :3, 3]
-        found = np.zeros((0, 7))
-        while len(found) < n:
-            sol = position_ik(model.chain, values, target, rng.uniform(LO, HI, size=(2 * n, 7)))
-            found = np.vstack([found, sol[np.all(np.isfinite(sol), axis=1)]])
-        q.append(found[:n])
-        ids.append(np.full(n, s))
-        centres.append(target)
-    c = np.array(centres)
-    return PointSet(np.vstack(q), np.concatenate(ids),
-                    ((0, 1, float(np.linalg.norm(c[0] - c[1]))),)), c
-
-
 @pytest.mark.parametrize("kind", ["position", "position+gravity", "pose", "point"])
 def test_noise_free_data_recover_the_identifiable_parameters_to_1e_9(kind):
     model = ArmModel(panda_chain(TOOL), gravity=kind.endswith("gravity"))
     if kind == "point":
-        design = _point_set(model, np.zeros(model.chain.size), (20, 20, 20), seed=5)[0]
-        errors = layout(model, design).split(_truth(model, design, seed=6))[1]
-        meas, centres = _point_set(model, errors, (20, 20, 20), seed=7)
+        design = point_set(model, np.zeros(model.chain.size), (20, 20, 20), seed=5, ik=position_ik)[0]
+        errors = layout(model, design).split(truth(model, design, seed=6))[1]
+        meas, centres = point_set(model, errors, (20, 20, 20), seed=7, ik=position_ik)
         x = np.r_[centres.ravel(), errors]
     else:
         q = poses(60, 2)
-        design = _position_set(model, initial_parameters(model, PositionSet(
+        design = position_set(model, initial_parameters(model, PositionSet(
             q, np.zeros((60, 3)))), q)
-        x = _truth(model, design, seed=3)
-        meas = _pose_set(model, x, q) if kind == "pose" else _position_set(model, x, q)
+        x = truth(model, design, seed=3)
+        meas = _pose_set(model, x, q) if kind == "pose" else position_set(model, x, q)
     cal = calibrate(model, meas)
     k = 3 * cal.layout.n_points                            # socket centres first, then errors
     assert np.linalg.norm(cal.x[k:] - x[k:]) <= 1e-9 * np.linalg.norm(x[k:])
@@ -116,16 +83,7 @@ def test_noise_free_data_recover_the_identifiable_parameters_to_1e_9(kind):
 
 
 def test_noisy_estimates_lie_within_3_sigma_of_the_estimator_covariance():
-    model = ArmModel(panda_chain(TOOL), gravity=True)
-    q = poses(150, 8)
-    design = _position_set(model, np.zeros(layout(model, PositionSet(
-        q, np.zeros((150, 3)))).size), q)
-    x = _truth(model, design, seed=9)
-    cal = calibrate(model, _position_set(model, x, q, noise=15e-6, seed=10))
-    ind = np.asarray(cal.report.independent)
-    z = (cal.x - x)[ind] / np.sqrt(np.diag(cal.covariance))
-    assert 0.8 < cal.residual_rms < 1.2        # the stated noise explains the residuals
-    assert np.abs(z).max() < 3.0, [cal.names[i] for i in ind[np.abs(z) >= 3]]
+    assert_noisy_estimates_within_3_sigma(ArmModel(panda_chain(TOOL), gravity=True))
 
 
 def test_identifiability_report_names_the_three_kinds():
@@ -197,14 +155,14 @@ def test_gravity_aware_does_not_overfit_a_rigid_plant():
 def test_bad_campaigns_fail_with_what_is_missing():
     model = ArmModel(panda_chain(TOOL))
     q = poses(40, 12)
-    good = _position_set(model, np.zeros(layout(model, PositionSet(q, np.zeros((40, 3)))).size),
+    good = position_set(model, np.zeros(layout(model, PositionSet(q, np.zeros((40, 3)))).size),
                          q)
     with pytest.raises(IdentificationError, match=r"5 poses give 15 equations for 31 .* 11 poses"):
         calibrate(model, replace(good, q=q[:5], position=good.position[:5], tau_gravity=None))
     flat = np.tile(q[0], (40, 1))
     flat[:, 0] = np.linspace(-2, 2, 40)                    # only joint 1 moves
     with pytest.raises(IdentificationError, match="rank deficient.*cannot be separated"):
-        calibrate(model, _position_set(model, np.zeros(layout(model, good).size), flat))
+        calibrate(model, position_set(model, np.zeros(layout(model, good).size), flat))
     bad = good.position.copy()
     bad[7, 1] = np.nan
     with pytest.raises(IdentificationError, match="NaN.*pose 7"):

@@ -16,7 +16,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from arm_cal_support import HI, LO, TOOL, gravity_like_load, poses
+from arm_cal_support import (
+    TOOL,
+    assert_noisy_estimates_within_3_sigma,
+    gravity_like_load,
+    point_set,
+    poses,
+    position_set,
+    truth,
+)
 
 from identify import poe
 from identify.arm_calibration import calibrate, identifiability_of
@@ -36,7 +44,6 @@ from identify.errors import IdentificationError
 from identify.mdh import panda_chain
 from identify.panda_data import load_panda_folder
 from identify.poe_calibration import panda_poe_chain, poe_kinematics
-from identify.poe_design import tool_ik
 from serpar.cmd_calibrate_arm import cmd_calibrate_arm
 from tasks.arm_calibration_run import real_data_calibration, simulated_calibration
 from tasks.arm_truth import TruthConfig, run_campaign
@@ -44,44 +51,6 @@ from tasks.arm_truth import TruthConfig, run_campaign
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "panda_1"
 
 
-
-
-def _truth(model: ArmModel, meas, seed: int) -> np.ndarray:
-    """Errors on the identifiable parameters only (the others are not recoverable)."""
-    rep = identifiability_of(model, meas)
-    x = initial_parameters(model, meas)
-    rng = np.random.default_rng(seed)
-    for i in rep.independent:
-        name = rep.names[i]
-        if not name.startswith("socket"):
-            x[i] += rng.normal() * (1e-4 if name.startswith("c") else
-                                    5e-4 if ".t" in name else 1e-3)
-    return x
-
-
-def _position_set(model, x, q, noise=0.0, seed=0):
-    p = predict(model, x, layout(model, PositionSet(q, np.zeros((len(q), 3)))), q, gravity_like_load(q))
-    noisy = p[:, :3, 3] + np.random.default_rng(seed).normal(size=(len(q), 3)) * noise
-    return PositionSet(q, noisy, 15e-6, gravity_like_load(q))
-
-
-def _point_set(model, chain_errors, counts, seed):
-    """Consistent sockets of a known true chain: each socket's poses reach one point."""
-    rng = np.random.default_rng(seed)
-    values = model.chain.values(chain_errors)
-    q, ids, centres = [], [], []
-    for s, n in enumerate(counts):
-        target = chain_forward(model.chain, values, rng.uniform(LO, HI)[None])[0, :3, 3]
-        found = np.zeros((0, 7))
-        while len(found) < n:
-            sol = tool_ik(model.chain, values, target, rng.uniform(LO, HI, size=(2 * n, 7)))
-            found = np.vstack([found, sol[np.all(np.isfinite(sol), axis=1)]])
-        q.append(found[:n])
-        ids.append(np.full(n, s))
-        centres.append(target)
-    c = np.array(centres)
-    return PointSet(np.vstack(q), np.concatenate(ids),
-                    ((0, 1, float(np.linalg.norm(c[0] - c[1]))),)), c
 
 
 def _fd_twist(f, h=1e-6):
@@ -115,20 +84,20 @@ def test_poe_chain_is_the_mdh_arm_and_its_jacobian_matches_finite_differences():
 def test_noise_free_data_recover_the_identifiable_poe_parameters_to_1e_9(kind):
     model = ArmModel(panda_poe_chain(TOOL), gravity=kind.endswith("gravity"))
     if kind == "point":
-        design = _point_set(model, np.zeros(model.chain.size), (20, 20, 20), seed=5)[0]
-        errors = layout(model, design).split(_truth(model, design, seed=6))[1]
-        meas, centres = _point_set(model, errors, (20, 20, 20), seed=7)
+        design = point_set(model, np.zeros(model.chain.size), (20, 20, 20), seed=5)[0]
+        errors = layout(model, design).split(truth(model, design, seed=6))[1]
+        meas, centres = point_set(model, errors, (20, 20, 20), seed=7)
         x = np.r_[centres.ravel(), errors]
     else:
         q = poses(60, 2)
-        design = _position_set(model, np.zeros(layout(model, PositionSet(
+        design = position_set(model, np.zeros(layout(model, PositionSet(
             q, np.zeros((60, 3)))).size), q)
-        x = _truth(model, design, seed=3)
+        x = truth(model, design, seed=3)
         if kind == "pose":
             t = predict(model, x, layout(model, design), q)
             meas = PoseSet(q, t[:, :3, 3], t[:, :3, :3])
         else:
-            meas = _position_set(model, x, q)
+            meas = position_set(model, x, q)
     cal = calibrate(model, meas)
     k = 3 * cal.layout.n_points                            # socket centres first, then errors
     assert np.linalg.norm(cal.x[k:] - x[k:]) <= 1e-9 * np.linalg.norm(x[k:])
@@ -136,16 +105,7 @@ def test_noise_free_data_recover_the_identifiable_poe_parameters_to_1e_9(kind):
 
 
 def test_noisy_poe_estimates_lie_within_3_sigma_of_the_estimator_covariance():
-    model = ArmModel(panda_poe_chain(TOOL), gravity=True)
-    q = poses(150, 8)
-    design = _position_set(model, np.zeros(layout(model, PositionSet(
-        q, np.zeros((150, 3)))).size), q)
-    x = _truth(model, design, seed=9)
-    cal = calibrate(model, _position_set(model, x, q, noise=15e-6, seed=10))
-    ind = np.asarray(cal.report.independent)
-    z = (cal.x - x)[ind] / np.sqrt(np.diag(cal.covariance))
-    assert 0.8 < cal.residual_rms < 1.2        # the stated noise explains the residuals
-    assert np.abs(z).max() < 3.0, [cal.names[i] for i in ind[np.abs(z) >= 3]]
+    assert_noisy_estimates_within_3_sigma(ArmModel(panda_poe_chain(TOOL), gravity=True))
 
 
 def test_poe_identifiability_report_names_the_three_kinds_and_the_gauge():
@@ -177,7 +137,7 @@ def test_a_campaign_that_never_turns_joint_7_flags_its_twist_as_unidentifiable()
     model = ArmModel(panda_poe_chain(TOOL))
     q = poses(60, 13)
     q[:, 6] = 0.4          # deliberately: joint 7's axis is then just part of the tool
-    meas = _position_set(model, np.zeros(layout(model, PositionSet(
+    meas = position_set(model, np.zeros(layout(model, PositionSet(
         q, np.zeros((60, 3)))).size), q)
     jac = residuals_and_jacobian(model, meas, initial_parameters(model, meas))[1]
     rep = identifiability(jac, parameter_names(model, meas),
@@ -213,7 +173,7 @@ def test_poe_and_mdh_reach_the_same_verification_accuracy_on_the_simulated_arm()
 def test_too_few_poses_for_the_poe_model_fail_in_one_line():
     model = ArmModel(panda_poe_chain(TOOL))
     q = poses(5, 12)
-    meas = _position_set(model, np.zeros(layout(model, PositionSet(
+    meas = position_set(model, np.zeros(layout(model, PositionSet(
         q, np.zeros((5, 3)))).size), q)
     with pytest.raises(IdentificationError) as err:
         calibrate(model, replace(meas, tau_gravity=None))
