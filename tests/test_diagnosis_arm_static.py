@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pyarrow as pa
 import pytest
-from diagnosis_support import RMS_TARGET, run_trials
+from diagnosis_support import RMS_TARGET, assert_jacobian_matches_differences, run_trials
 
 from identify.diagnosis.arm_static import family_from_data
 from identify.diagnosis.arm_static_data import static_data, to_recording
@@ -108,19 +108,8 @@ def test_exact_jacobian_matches_differences(results) -> None:
     params = {"baseline": np.zeros(family.baseline.n_params)}
     for e in family.effects:
         params[e.name] = e.x0 + (e.upper - e.x0) * 0.01 * rng.uniform(size=e.n_params)
-    rows = np.arange(0, family.n_samples, 3)
-    jac = family.jacobian(params, rows)
-    k = 0
-    for name, x in params.items():
-        for i in range(x.size):
-            h = max(abs(x[i]) * 1e-6, 1e-10)
-            up, dn = x.copy(), x.copy()
-            up[i] += h
-            dn[i] -= h
-            num = (family.residual({**params, name: up}, rows)
-                   - family.residual({**params, name: dn}, rows)) / (2 * h)
-            assert np.allclose(jac[:, k], num, rtol=2e-3, atol=2e-3 * np.abs(num).max() + 1e-9)
-            k += 1
+    assert_jacobian_matches_differences(family, params, np.arange(0, family.n_samples, 3),
+                                        1e-6, 1e-10, 2e-3, floor=1e-9)
 
 
 def test_bad_measurements_fail_with_one_line() -> None:

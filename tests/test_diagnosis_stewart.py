@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pyarrow as pa
 import pytest
-from diagnosis_support import RMS_TARGET, run_trials
+from diagnosis_support import RMS_TARGET, assert_jacobian_matches_differences, run_trials
 
 from controllers.stewart_kinematics import forward_kinematics, inverse_kinematics
 from identify.diagnosis.choose import family_from_recording
@@ -157,19 +157,8 @@ def test_exact_jacobian_matches_differences(results) -> None:
     rng = np.random.default_rng(0)
     params = {e.name: e.x0 + (e.upper - e.x0) * 0.01 * rng.uniform(size=e.n_params)
               for e in fam.effects}
-    rows = np.arange(0, fam.n_samples, 4)
-    jac = fam.jacobian(params, rows)
-    k = 0
-    for name, x in params.items():
-        for i in range(x.size):
-            h = max(abs(x[i]) * 1e-5, 1e-12)
-            up, dn = x.copy(), x.copy()
-            up[i] += h
-            dn[i] -= h
-            num = (fam.residual({**params, name: up}, rows)
-                   - fam.residual({**params, name: dn}, rows)) / (2 * h)
-            assert np.allclose(jac[:, k], num, rtol=1e-3, atol=1e-3 * np.abs(num).max()), (name, i)
-            k += 1
+    assert_jacobian_matches_differences(fam, params, np.arange(0, fam.n_samples, 4),
+                                        1e-5, 1e-12, 1e-3)
 
 
 # -- the twin's physics ----------------------------------------------------------------------
