@@ -4,6 +4,7 @@ rotation about one axis."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -62,9 +63,10 @@ class PoseMove:
         if not self.duration > 0:
             raise ConfigError(f"duration={self.duration} s must be > 0")
 
-    @property
+    @cached_property
     def rotation_vector(self) -> Vec:
-        """Rotation taking start_rot to goal_rot, in the base frame [rad]."""
+        """Rotation taking start_rot to goal_rot, in the base frame [rad] (computed once: `at`
+        runs every control period)."""
         return orientation_error(self.start_rot, self.goal_rot)
 
     def at(self, t: float) -> CartesianTarget:

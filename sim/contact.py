@@ -57,6 +57,34 @@ def contact_force_on(model: mujoco.MjModel, data: mujoco.MjData, geoms: Collecti
     return ContactForceProbe(model, geoms, others).force(data)
 
 
+CONTACT_REDUCE_NETFORCE = 3
+"""Contact sensor `reduce` code for "netforce" (MuJoCo's mjtConReduce has no Python enum)."""
+
+
+PLATE_CONTACT = "plate_contact"
+"""Name of the sensor of the contact force between the conductor being scored and the plate."""
+
+
+def add_plate_contact_sensor(spec: mujoco.MjSpec, part_body: str, plate_body: str) -> None:
+    """A MuJoCo contact sensor: the net contact force [N] between one part and the baseplate
+    body, summed by MuJoCo in C at every step (cheap enough to read after every substep, which
+    the insertion's scoring does). :func:`aim_plate_contact` points it at another part."""
+    force = int(mujoco.mjtConDataField.mjCONDATA_FORCE)
+    spec.add_sensor(name=PLATE_CONTACT, type=mujoco.mjtSensor.mjSENS_CONTACT,
+                    objtype=mujoco.mjtObj.mjOBJ_BODY, objname=part_body,
+                    reftype=mujoco.mjtObj.mjOBJ_BODY, refname=plate_body,
+                    intprm=[1 << force, CONTACT_REDUCE_NETFORCE, 1])
+
+
+def aim_plate_contact(model: mujoco.MjModel, part_body: int) -> slice:
+    """Point the plate contact sensor at body `part_body` (one sensor, not one per part: 36
+    contact sensors cost 2-5 us per step, as much as the scoring saves); returns where its
+    force [N, 3 values] sits in data.sensordata."""
+    sensor = model.sensor(PLATE_CONTACT)
+    model.sensor_objid[sensor.id] = part_body
+    return slice(int(sensor.adr[0]), int(sensor.adr[0]) + 3)
+
+
 def body_geoms(model: mujoco.MjModel, body_id: int) -> set[int]:
     """Geom ids of one body."""
     start = model.body_geomadr[body_id]

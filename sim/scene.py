@@ -19,9 +19,10 @@ from sim.baseplate import BaseplateConfig, build_baseplate_spec
 from sim.calibration_board import CheckerboardConfig, add_board
 from sim.cameras import DEFAULT_PAIRS, SENSOR_PIXELS, StereoPairConfig, add_stereo_pair
 from sim.conductor import ConductorConfig, build_conductor_spec
+from sim.contact import add_plate_contact_sensor
 from sim.errors import ConfigError
 from sim.physics import PhysicsConfig
-from sim.seat_lock import add_seat_locks
+from sim.seat_lock import PLATE_BODY, add_seat_locks
 from sim.stewart import StewartConfig, build_stewart_spec, home_strokes
 from sim.tolerances import DISTRIBUTIONS, DrawnDiameters, draw_diameters
 from sim.tray import TrayConfig, build_tray_spec
@@ -156,6 +157,8 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
         px, py = pockets[k]
         spec.attach(part, prefix=names.conductor(k), frame=world.add_frame(pos=[tx + px, ty + py, top]))
     add_seat_locks(spec, cfg.n_conductors)
+    if cfg.n_conductors:
+        add_plate_contact_sensor(spec, f"{names.conductor(0)}conductor", PLATE_BODY)
     for pair in cfg.stereo_pairs:
         add_stereo_pair(spec, pair)
     return spec, diameters

@@ -18,7 +18,7 @@ import numpy as np
 from controllers.arm_controller import ControlLaw
 from controllers.arm_laws import CartesianTarget, ForceTarget
 from sim import names
-from sim.contact import ContactForceProbe, body_geoms
+from sim.contact import aim_plate_contact
 from sim.errors import ConfigError
 from tasks.cell_runtime import CellRuntime
 from tasks.episode_config import Outcome
@@ -78,8 +78,7 @@ class _Truth:
     def __init__(self, rt: CellRuntime, conductor: int, hole: int) -> None:
         m = rt.scene.model
         self.rt, self.hole_site = rt, int(rt.scene.hole_sites[hole])
-        plate = [g for g in range(m.ngeom) if m.body(m.geom_bodyid[g]).name.startswith(names.PLATE)]
-        self.probe = ContactForceProbe(m, body_geoms(m, int(rt.scene.conductor_bodies[conductor])), plate)
+        self.force_adr = aim_plate_contact(m, int(rt.scene.conductor_bodies[conductor]))
         self.tip = m.site(f"{names.conductor(conductor)}tip").id
         self.shoulder = m.site(f"{names.conductor(conductor)}shoulder").id
         self._sum, self._n = 0.0, 0
@@ -87,7 +86,7 @@ class _Truth:
         """Depth below the entry where the straight bore begins (the chamfer's foot) [m]."""
 
     def force(self) -> float:
-        return float(np.linalg.norm(self.probe.force(self.rt.scene.data)))
+        return float(np.linalg.norm(self.rt.scene.data.sensordata[self.force_adr]))
 
     def accumulate(self) -> None:
         self._sum, self._n = self._sum + self.force(), self._n + 1
