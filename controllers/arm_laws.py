@@ -186,7 +186,9 @@ def force_position_torque(nominal: NominalArm, target: CartesianTarget, gains: F
 
 def next_force_offset(offset: float, force: ForceTarget, measured_force: float,
                       gains: ForcePositionGains, dt: float) -> float:
-    """Integrate the reference offset: d(offset)/dt = admittance (F_d - F_s), clamped."""
+    """Integrate the reference offset: d(offset)/dt = admittance (F_d - F_s), clamped; toward
+    the push no faster than the speed limit, else the reference winds up ahead of a braked TCP
+    and the stored spring force overshoots the target on contact."""
     rate = np.clip(gains.admittance * (force.force - measured_force), -gains.max_offset_rate,
-                   gains.max_offset_rate)
+                   min(gains.max_offset_rate, gains.max_speed))
     return float(np.clip(offset + rate * dt, -gains.max_offset, gains.max_offset))

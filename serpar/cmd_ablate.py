@@ -13,7 +13,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("ablate", help="success rate per configuration: serial alone, Stewart "
                                       "uncalibrated / calibrated, impedance vs force-position")
     p.add_argument("--episodes", type=int, default=1, help="episodes per configuration (default 1)")
-    p.add_argument("--holes", type=int, default=6, help="holes per episode, 1..36 (default 6)")
+    p.add_argument("--holes", type=int, default=6, help="holes per episode, 1..36, spread evenly over the grid (default 6: its diagonal, "
+                        "0, 7, 14, 21, 28, 35)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
     p.add_argument("--workers", type=int, help="parallel local processes (default 2; 1 with --ray)")
     p.add_argument("--ray", metavar="ADDRESS",
@@ -31,7 +32,7 @@ def _fmt_rate(s) -> str:
 def cmd_ablate(args: argparse.Namespace) -> int:
     from serpar.cmd_run import check_ray
     from sim.errors import ConfigError
-    from tasks.ablation import ablation_arms, run_ablation
+    from tasks.ablation import ablation_arms, run_ablation, spread_holes
     from tasks.camera_cache import calibrated_pairs
     from tasks.episode_config import EpisodeConfig
     from tasks.run_episodes import episode_configs
@@ -42,7 +43,7 @@ def cmd_ablate(args: argparse.Namespace) -> int:
     if args.episodes < 1 or args.workers < 1:
         raise ConfigError(f"--episodes {args.episodes}, --workers {args.workers}: both must be >= 1")
     check_ray(args.ray, args.workers)
-    base = EpisodeConfig(seed=args.seed, holes=args.holes)
+    base = EpisodeConfig(seed=args.seed, holes=spread_holes(args.holes))
     def log(message: str) -> None:
         print(message, file=sys.stderr)
 

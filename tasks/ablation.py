@@ -15,7 +15,10 @@ import statistics
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from tasks.episode_config import EpisodeConfig
+import numpy as np
+
+from sim.errors import ConfigError
+from tasks.episode_config import N_HOLES, EpisodeConfig
 from tasks.run_episodes import Record, RunSummary, episode_configs, run_many, summarise
 
 
@@ -23,6 +26,16 @@ from tasks.run_episodes import Record, RunSummary, episode_configs, run_many, su
 class AblationArm:
     name: str
     config: EpisodeConfig
+
+
+def spread_holes(count: int) -> tuple[int, ...]:
+    """`count` holes spread evenly over the grid's index range, first and last included (for 6:
+    0, 7, 14, 21, 28, 35, the 6 x 6 grid's diagonal). The platform's model errors grow with the
+    distance it moves the plate from home, so a row next to the station hides what the
+    calibration is for."""
+    if not 1 <= count <= N_HOLES:
+        raise ConfigError(f"--holes {count}: a count in 1..{N_HOLES}")
+    return tuple(int(h) for h in np.unique(np.linspace(0, N_HOLES - 1, count).round()))
 
 
 def ablation_arms(base: EpisodeConfig) -> list[AblationArm]:

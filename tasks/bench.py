@@ -126,8 +126,8 @@ def in_contact(cfg: BenchConfig) -> dict[str, object]:
     rot = d.site_xmat[m.site("arm/tcp").id].reshape(3, 3).copy()
     held = CartesianTarget(contact_tcp - np.array([0, 0, 5e-4]), rot)
     force = ForceTarget(DOWN, 5.0)
-    # 1.5 s: the law starts 1 mm above the plate, and the speed-limited approach lets the
-    # reference run ahead (the push overshoots to ~7 N and settles to 5 +- 0.1 N by ~1.2 s).
+    # 1.5 s: the law starts 1 mm above the plate; the speed-limited approach lands at ~3 mm/s,
+    # the push overshoots to ~7 N and settles to 5 N within ~1 s.
     for _ in range(round(max(cfg.settle_s, 1.5) / ctrl.dt)):
         ctrl.track(held, ControlLaw.FORCE_POSITION, force)
         ctrl.step(m, d)
