@@ -69,11 +69,12 @@ def check_ray(address: str | None, workers: int) -> None:
     if address is None:
         return
     from sim.errors import ConfigError
-    from tasks.ray_runner import require_ray
+    from tasks.ray_runner import check_reachable, require_ray
 
     if workers > 1:
         raise ConfigError(f"--ray and --workers {workers}: choose one (Ray places the episodes on its own CPUs)")
     require_ray()
+    check_reachable(address)
 
 
 def record_root(folder: str) -> str:

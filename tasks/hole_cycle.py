@@ -25,7 +25,9 @@ HAND_DOWN = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 INSPECT_ROLL = np.radians(5.0)
 CLEAR_Z = 0.345
 """Travel height of the TCP [m]: the part's tip clears the plate, seated parts and the tray."""
-TRANSIT_SPEED = 0.8
+TRAVEL_SPEED = 0.8
+"""Peak TCP speed of the episode's free-space travel [m/s] (under the Panda's 1.7 m/s; faster
+moves let the held part slide further in the pads)."""
 FINE_SPEED = 0.08
 """Approach to the part and lift out of the pocket [m/s]."""
 ABOVE_PART = 0.012
@@ -48,9 +50,9 @@ def travel(rt: CellRuntime, goal: np.ndarray, rot: np.ndarray, clear_z: float = 
     """Rise to clear_z, travel level to above the goal, then go down to it."""
     pos, _ = tcp_pose(rt)
     if pos[2] < clear_z - 1e-4:
-        move_tcp(rt, np.array([pos[0], pos[1], clear_z]), rot, speed=TRANSIT_SPEED, settle_s=0.0)
-    move_tcp(rt, np.array([goal[0], goal[1], max(clear_z, goal[2])]), rot, speed=TRANSIT_SPEED, settle_s=0.0)
-    move_tcp(rt, np.asarray(goal, float), rot, speed=TRANSIT_SPEED, settle_s=0.1)
+        move_tcp(rt, np.array([pos[0], pos[1], clear_z]), rot, speed=TRAVEL_SPEED, settle_s=0.0)
+    move_tcp(rt, np.array([goal[0], goal[1], max(clear_z, goal[2])]), rot, speed=TRAVEL_SPEED, settle_s=0.0)
+    move_tcp(rt, np.asarray(goal, float), rot, speed=TRAVEL_SPEED, settle_s=0.1)
 
 
 def pick(rt: CellRuntime, sighting: ConductorSighting, body_diameter: float) -> float:

@@ -13,8 +13,9 @@ from controllers.arm_laws import CartesianTarget, orientation_error
 from controllers.trajectory import PoseMove
 from tasks.cell_runtime import CellRuntime
 
-TRANSIT_SPEED = 0.25
-"""Peak TCP speed of free-space moves [m/s] (the min-jerk peak is 1.875x the mean)."""
+DEFAULT_MOVE_SPEED = 0.25
+"""Default peak TCP speed of `move_tcp` [m/s] (the min-jerk peak is 1.875x the mean); the
+episode travels at `tasks.hole_cycle.TRAVEL_SPEED`."""
 TURN_SPEED = 1.0
 """Peak rotation speed of free-space moves [rad/s]."""
 MIN_MOVE_S = 0.15
@@ -29,7 +30,7 @@ def move_duration(start: np.ndarray, goal: np.ndarray, start_rot: np.ndarray,
 
 
 def move_tcp(rt: CellRuntime, goal: np.ndarray, goal_rot: np.ndarray,
-             speed: float = TRANSIT_SPEED, settle_s: float = 0.1) -> None:
+             speed: float = DEFAULT_MOVE_SPEED, settle_s: float = 0.1) -> None:
     """Impedance-controlled min-jerk move from the measured TCP pose to (goal, goal_rot)."""
     start, start_rot = rt.arm.nominal.tcp_pose()
     start, start_rot = start.copy(), start_rot.copy()

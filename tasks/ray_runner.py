@@ -7,6 +7,7 @@ stream back in completion order. Ray is imported only here, only when asked for.
 from __future__ import annotations
 
 import os
+import socket
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -22,6 +23,26 @@ def require_ray() -> Any:
     except ImportError:
         raise ConfigError(RAY_MISSING) from None
     return ray
+
+
+REACH_TIMEOUT_S = 5.0
+
+
+def check_reachable(address: str) -> None:
+    """Fail at once, in one line, when nothing answers at a ``[ray://]HOST:PORT`` address (Ray
+    itself retries an unreachable one for minutes); "local" and "auto" are not probed."""
+    if address in ("local", "auto"):
+        return
+    hostport = address.removeprefix("ray://")
+    host, sep, port = hostport.rpartition(":")
+    if not sep or not host or not port.isdigit():
+        raise ConfigError(f"--ray {address}: not an address; valid: local, auto, ray://HOST:PORT "
+                          "or a cluster's HOST:PORT")
+    try:
+        socket.create_connection((host, int(port)), timeout=REACH_TIMEOUT_S).close()
+    except OSError as exc:
+        raise ConfigError(f"--ray {address}: nothing answers at {host}:{port} "
+                          f"({exc.strerror or type(exc).__name__})") from None
 
 
 def _call(job: Any, cfg: EpisodeConfig, label: str | None) -> list[dict[str, object]]:

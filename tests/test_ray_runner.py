@@ -95,3 +95,23 @@ def test_ray_choices_are_one_line_errors(monkeypatch):
         require_ray()
     assert str(err.value) == RAY_MISSING == "--ray needs the cluster extra: pip install 'serpar[cluster]'"
     assert main(["ablate", "--ray", "auto"]) == 2
+
+
+def test_an_unreachable_ray_address_fails_at_once_in_one_line():
+    import socket
+
+    from tasks.ray_runner import check_reachable
+
+    with socket.socket() as s:  # a port nothing listens on: bound, never listening
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+        with pytest.raises(ConfigError, match=f"nothing answers at 127.0.0.1:{port}"):
+            check_reachable(f"ray://127.0.0.1:{port}")
+    with pytest.raises(ConfigError, match="valid: local, auto"):
+        check_reachable("ray://nohostport")
+    check_reachable("local")
+    check_reachable("auto")
+    with socket.socket() as s:  # something listening: passes
+        s.bind(("127.0.0.1", 0))
+        s.listen(1)
+        check_reachable(f"127.0.0.1:{s.getsockname()[1]}")
