@@ -173,3 +173,25 @@ def test_a_real_extra_row_still_fails():
     row = np.c_[np.arange(6), np.full(6, 6.0), np.zeros(6)]
     with pytest.raises(PlateNotFound, match="7"):
         assign_grid(_grid_points(row), BaseplateConfig(), np.eye(3))
+
+
+@pytest.mark.parametrize("empty", [3, 0])
+def test_a_nearly_full_plate_is_still_located_from_its_seated_tops(empty):
+    """Seen in a 36-hole episode (seed 0): with 7 holes left the plate was 'not found' (the
+    fit needed 8 empty holes), so the last 7 cycles ended vision_miss. Every matched hole,
+    empty or filled, now places the plate. Measured p95 0.021 / 0.019 mm at 1024 px."""
+    rng = np.random.default_rng(303)
+    offset = random_offset(CFG, rng, max_shift=5e-3, max_angle_deg=2.0)
+    holes = rng.permutation(CFG.baseplate.n_holes)[:CFG.baseplate.n_holes - empty]
+    scene = make_scene(CFG, offset, {k: int(h) for k, h in enumerate(holes)})
+    imaging = ImagingConfig(width=1024)
+    pair = StereoPair(*(true_camera(scene.model, scene.data, n, imaging.size) for n in CAMERAS))
+    camera = Camera(scene.model, imaging, seed=303)
+    frames = camera.shoot(scene.data, CAMERAS)
+    camera.close()
+    measurement = locate_holes(pair, frames["top_left"], frames["top_right"], CFG.baseplate,
+                               CFG.conductor, plate_layout(CFG))
+    assert len(measurement.indices("empty")) == empty
+    score = score_plate(scene, measurement)
+    assert score.seen == CFG.baseplate.n_holes and score.occupancy_correct == 1.0
+    assert score.p95 <= 0.10e-3, score

@@ -212,14 +212,18 @@ def locate_holes(pair: StereoPair, left: np.ndarray, right: np.ndarray,
                                        config.brass))
     hl, hr, hp = match_stereo(pair, holes_uv[0], holes_uv[1], region_hole, config.max_epipolar_px)
     tl, tr, tp = match_stereo(pair, tops_uv[0], tops_uv[1], region_top, 3 * config.max_epipolar_px)
-    if len(hp) < config.min_holes:
-        raise PlateNotFound(f"{len(hp)} empty holes matched in both images (need {config.min_holes}); "
-                            f"{len(holes_uv[0])} left and {len(holes_uv[1])} right detections")
-    keep_h, normal = on_plane(hp, rot_nominal[:, 2])
-    hl, hr, hp = hl[keep_h], hr[keep_h], hp[keep_h]
-    if len(tp):  # seated tops, taken down one body length, lie on the same plane
-        keep_t = np.abs((tp - conductor.body_length * normal - np.median(hp, axis=0)) @ normal) < PLANE_TOL
-        tl, tr, tp = tl[keep_t], tr[keep_t], tp[keep_t]
+    # A seated top, taken down one body length, lies on the entries' plane: every hole, empty
+    # or filled, places the plate (a nearly full plate has only a few empty ones left).
+    up = rot_nominal[:, 2]
+    entries = np.r_[hp, tp - conductor.body_length * up]
+    if len(entries) < config.min_holes:
+        raise PlateNotFound(f"{len(entries)} holes matched in both images, {len(hp)} empty and "
+                            f"{len(tp)} filled (need {config.min_holes}); {len(holes_uv[0])} + "
+                            f"{len(tops_uv[0])} left and {len(holes_uv[1])} + {len(tops_uv[1])} "
+                            "right detections")
+    keep, normal = on_plane(entries, up)
+    kh, kt = keep[:len(hp)], keep[len(hp):]
+    hl, hr, hp, tl, tr, tp = hl[kh], hr[kh], hp[kh], tl[kt], tr[kt], tp[kt]
     k = assign_grid(np.r_[hp, tp - conductor.body_length * normal], plate, rot_nominal)
     kind = np.r_[np.zeros(len(hp), int), np.ones(len(tp), int)]  # 0 empty, 1 occupied
     uv_l, uv_r = np.r_[holes_uv[0][hl], tops_uv[0][tl]], np.r_[holes_uv[1][hr], tops_uv[1][tr]]
