@@ -35,7 +35,8 @@ def conductor_body(geom: mujoco.MjsGeom) -> None:
 
 
 def plate_surface(geom: mujoco.MjsGeom) -> None:
-    """A plate bar or bore box: touches everything default except conductor bodies."""
+    """A plate bar, bore facet or the fixture: touches everything default except conductor
+    bodies and locked parts."""
     geom.contype, geom.conaffinity = 0, DEFAULT
 
 
