@@ -35,7 +35,7 @@ from vision.camera import StereoPair
 from vision.errors import HoleNotVisible, PlateNotFound
 from vision.layout import BoxRegion, PlateLayout, plate_layout
 from vision.plate_detect import PlateVisionConfig, find_dark_discs, measure_edge
-from vision.plate_grid import PLANE_TOL, assign_grid, on_plane
+from vision.plate_grid import assign_grid, on_plane
 from vision.tray import (
     BODY_DIAMETER,
     expected_diameter_px,
