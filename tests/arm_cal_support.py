@@ -85,3 +85,11 @@ def assert_noisy_estimates_within_3_sigma(model: ArmModel) -> None:
     z = (cal.x - x)[ind] / np.sqrt(np.diag(cal.covariance))
     assert 0.8 < cal.residual_rms < 1.2        # the stated noise explains the residuals
     assert np.abs(z).max() < 3.0, [cal.names[i] for i in ind[np.abs(z) >= 3]]
+
+
+def assert_recovered_exactly(model: ArmModel, meas, x: np.ndarray) -> None:
+    """Noise-free measurements: the calibration returns the true socket centres and errors."""
+    cal = calibrate(model, meas)
+    k = 3 * cal.layout.n_points                            # socket centres first, then errors
+    assert np.linalg.norm(cal.x[k:] - x[k:]) <= 1e-9 * np.linalg.norm(x[k:])
+    assert np.linalg.norm(cal.x[:k] - x[:k]) <= 1e-9 * max(np.linalg.norm(x[:k]), 1.0)

@@ -12,6 +12,7 @@ import pytest
 from arm_cal_support import (
     TOOL,
     assert_noisy_estimates_within_3_sigma,
+    assert_recovered_exactly,
     gravity_like_load,
     point_set,
     poses,
@@ -76,10 +77,7 @@ def test_noise_free_data_recover_the_identifiable_parameters_to_1e_9(kind):
             q, np.zeros((60, 3)))), q)
         x = truth(model, design, seed=3)
         meas = _pose_set(model, x, q) if kind == "pose" else position_set(model, x, q)
-    cal = calibrate(model, meas)
-    k = 3 * cal.layout.n_points                            # socket centres first, then errors
-    assert np.linalg.norm(cal.x[k:] - x[k:]) <= 1e-9 * np.linalg.norm(x[k:])
-    assert np.linalg.norm(cal.x[:k] - x[:k]) <= 1e-9 * max(np.linalg.norm(x[:k]), 1.0)
+    assert_recovered_exactly(model, meas, x)
 
 
 def test_noisy_estimates_lie_within_3_sigma_of_the_estimator_covariance():

@@ -19,6 +19,7 @@ import pytest
 from arm_cal_support import (
     TOOL,
     assert_noisy_estimates_within_3_sigma,
+    assert_recovered_exactly,
     gravity_like_load,
     point_set,
     poses,
@@ -98,10 +99,7 @@ def test_noise_free_data_recover_the_identifiable_poe_parameters_to_1e_9(kind):
             meas = PoseSet(q, t[:, :3, 3], t[:, :3, :3])
         else:
             meas = position_set(model, x, q)
-    cal = calibrate(model, meas)
-    k = 3 * cal.layout.n_points                            # socket centres first, then errors
-    assert np.linalg.norm(cal.x[k:] - x[k:]) <= 1e-9 * np.linalg.norm(x[k:])
-    assert np.linalg.norm(cal.x[:k] - x[:k]) <= 1e-9 * max(np.linalg.norm(x[:k]), 1.0)
+    assert_recovered_exactly(model, meas, x)
 
 
 def test_noisy_poe_estimates_lie_within_3_sigma_of_the_estimator_covariance():
