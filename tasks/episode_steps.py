@@ -37,7 +37,7 @@ from vision.camera import StereoPair
 from vision.errors import ConductorNotInView, VisionError
 from vision.imaging import Camera
 from vision.inhand import inspect_in_hand
-from vision.layout import plate_layout, tray_pockets, tray_region
+from vision.layout import plate_in_view, plate_layout, tray_pockets, tray_region
 from vision.plate import PlateMeasurement, locate_holes
 from vision.tray import locate_conductors
 
@@ -55,6 +55,10 @@ UP = np.array([0.0, 0.0, 1.0])
 FOLLOW_DEADBAND = 2e-6
 """Sideways TCP wander below which the platform is not re-commanded [m] (encoder resolution
 at the TCP is ~3 um)."""
+FOLLOW_STOP_ABOVE = 3e-4
+"""The platform stops following when the journal tip is this far above the hole entry, as
+vision placed it [m]: a margin over the entry's height error (~0.05 mm) and the chamfers'
+0.1 mm legs, so the hole never moves while the tip may touch it."""
 
 
 @dataclass(frozen=True)
@@ -76,12 +80,16 @@ class HoleUnderJournal:
     The arm's dry joint friction lets the TCP wander sideways by ~0.1 mm as it moves down from
     the hover; its encoders see the wander (the measured TCP), and the platform shifts the hole
     with it every `every` control periods (10: 100 Hz). Only the sideways part is followed:
-    the approach itself stays the arm's."""
+    the approach itself stays the arm's.
+
+    Following stops once the TCP has come `stop_after` along the axis: a hole that follows a
+    tip already on its chamfer runs away from it as the chamfer pushes the tip toward the
+    axis, and the stiff platform drives the chamfer into the compliant arm."""
 
     def __init__(self, plate: PlateCommander, data: mujoco.MjData, hole_in_plate: np.ndarray,
                  axis_in_plate: np.ndarray, entry: np.ndarray, axis: np.ndarray, start: np.ndarray,
-                 every: int = 10) -> None:
-        self.plate, self.data, self.every = plate, data, every
+                 stop_after: float, every: int = 10) -> None:
+        self.plate, self.data, self.every, self.stop_after = plate, data, every, stop_after
         self.hole_in_plate, self.axis_in_plate = hole_in_plate, axis_in_plate
         self.entry, self.axis, self.start = entry, axis, np.asarray(start, float).copy()
         self.shift, self.calls = np.zeros(3), 0
@@ -91,7 +99,10 @@ class HoleUnderJournal:
         if self.calls % self.every:
             return
         shift = tcp - self.start
-        shift -= (shift @ self.axis) * self.axis
+        travelled = float(shift @ self.axis)
+        if travelled > self.stop_after:
+            return
+        shift -= travelled * self.axis
         if np.linalg.norm(shift - self.shift) < FOLLOW_DEADBAND:
             return
         self.shift = shift
@@ -122,6 +133,9 @@ class HoleCycle:
         self.attempted: set[int] = set()
         self.holes_in_plate: np.ndarray | None = None
         self.axis_in_plate = UP
+        self.viewing_pose: np.ndarray | None = None
+        """Platform pose of the registration shot (Stewart path): where the top pair sees the
+        whole plate."""
         self.hole: int | None = None
         self.conductor: int | None = None
         self.phase = "start"
@@ -153,10 +167,24 @@ class HoleCycle:
         travel(self.rt, WAIT_POSE, HAND_DOWN)
         _, plate = self._look_top()
         self.plate.register(plate)
+        self.viewing_pose = self.plate.commanded.copy()
         plate_T_base = inverse(self.plate.plate_pose())
         centres = np.array([h.centre for h in plate.holes])
         self.holes_in_plate = centres @ plate_T_base[:3, :3].T + plate_T_base[:3, 3]
         self.axis_in_plate = plate_T_base[:3, :3] @ plate.normal
+
+    def _bring_plate_into_view(self) -> float:
+        """If the platform has carried the plate where the top pair cannot see all of it (a far
+        hole at the station), ramp it back to the viewing pose while the arm clears the view;
+        returns when the plate will have settled (simulation time), or 0."""
+        if self.viewing_pose is None:
+            return 0.0
+        pair = self.top
+        if plate_in_view(plate_layout(NOMINAL), NOMINAL.baseplate, self.plate.plate_pose(), self.holes_in_plate,
+                         (pair.left, pair.right), above=NOMINAL.conductor.body_length):
+            return 0.0
+        ramp = self.plate.move_to(self.rt.scene.data, self.viewing_pose, self.rt.time)
+        return self.rt.time + ramp + PLATFORM_SETTLE_S
 
     # --- the cycle -----------------------------------------------------------------------
     def _fail(self, outcome: Outcome, reason: str) -> CycleFailure:
@@ -173,7 +201,10 @@ class HoleCycle:
         self.hole = self.conductor = None
         self.phase_start = {}
         self._enter("locate")  # steps 1 and 2 share one top shot
+        ready = self._bring_plate_into_view()
         travel(rt, WAIT_POSE, HAND_DOWN)
+        if ready > rt.time:
+            rt.run(ready - rt.time)
         try:
             sightings, plate = self._look_top()
         except VisionError as exc:
@@ -227,7 +258,7 @@ class HoleCycle:
             rt.run(ramp + PLATFORM_SETTLE_S)
             seat, approach = pos + HOVER * axis, axis
             follow = HoleUnderJournal(self.plate, d, self.holes_in_plate[self.hole], self.axis_in_plate,
-                                      entry, axis, pos)
+                                      entry, axis, pos, stop_after=HOVER - lj - FOLLOW_STOP_ABOVE)
         else:
             h = plate.holes[self.hole]
             seat = seat_tcp(h.centre, HAND_DOWN, held, lj)

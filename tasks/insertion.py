@@ -34,6 +34,10 @@ class InsertionConfig:
     """[m/s] along the axis toward the expected contact."""
     overtravel: float = 0.003
     """How far past the expected seat the approach target lies [m]."""
+    force_ramp_s: float = 0.3
+    """After contact F_d ramps from contact_n to force_n over this long [s]: a step to the full
+    push presses a tip that met the chamfer off-axis up into the grip, and the part snaps down
+    into the bore when the tip slides off the chamfer's foot."""
     stall_speed: float = 2e-4
     """The push ends when the TCP advances slower than this [m/s] ..."""
     stall_s: float = 0.3
@@ -49,6 +53,14 @@ class InsertionConfig:
                               f"{self.contact_n}, {self.force_n}, {self.damage_force_n}")
         if not (self.approach_speed > 0 and self.stall_speed > 0 and self.time_limit_s > 0):
             raise ConfigError("approach_speed, stall_speed and time_limit_s must be > 0")
+        if not self.force_ramp_s >= 0:
+            raise ConfigError(f"force_ramp_s {self.force_ramp_s} must be >= 0 (0 = a step)")
+
+    def push_at(self, since_contact: float) -> float:
+        """F_d [N] `since_contact` seconds after the guarded approach ended."""
+        if since_contact >= self.force_ramp_s:
+            return self.force_n
+        return self.contact_n + (self.force_n - self.contact_n) * since_contact / self.force_ramp_s
 
 
 @dataclass(frozen=True)
@@ -140,6 +152,7 @@ def _push(rt: CellRuntime, truth: _Truth, start: np.ndarray, goal: np.ndarray, r
           follow: Callable[[np.ndarray], None] | None) -> InsertionResult:
     t0, peak, lateral, t_contact = rt.time, 0.0, float("nan"), None
     held: CartesianTarget | None = None
+    t_held = t0
     window: deque[float] = deque(maxlen=round(config.stall_s / rt.dt) + 1)
     while rt.time - t0 < config.time_limit_s:
         if held is None:
@@ -150,11 +163,11 @@ def _push(rt: CellRuntime, truth: _Truth, start: np.ndarray, goal: np.ndarray, r
                          ControlLaw.IMPEDANCE)
             if rt.arm.measured_push() > config.contact_n:
                 pos, _ = rt.arm.nominal.tcp_pose()
-                held = CartesianTarget(pos.copy(), rot)
+                held, t_held = CartesianTarget(pos.copy(), rot), rt.time
             elif follow is not None:
                 follow(rt.arm.nominal.tcp_pose()[0])
         if held is not None:
-            rt.arm.track(held, law, ForceTarget(axis, config.force_n))
+            rt.arm.track(held, law, ForceTarget(axis, config.push_at(rt.time - t_held)))
         rt.step()
         force = truth.period_mean()
         peak = max(peak, force)
@@ -165,7 +178,8 @@ def _push(rt: CellRuntime, truth: _Truth, start: np.ndarray, goal: np.ndarray, r
             # TCP, i.e. 3 mm/s of apparent speed in a single 1 ms period.
             pos, _ = rt.arm.nominal.tcp_pose()
             window.append(float(axis @ pos))
-            if len(window) == window.maxlen and window[-1] - window[0] < config.stall_speed * config.stall_s:
+            ramped = rt.time - t_held >= config.force_ramp_s  # a stall at a partial push is no end
+            if ramped and len(window) == window.maxlen and window[-1] - window[0] < config.stall_speed * config.stall_s:
                 break
     timed_out = rt.time - t0 >= config.time_limit_s
     return _classify(truth, config, peak, lateral, t_contact, rt.time, timed_out)

@@ -7,12 +7,13 @@ import pytest
 
 from controllers.arm_controller import ControlLaw
 from sim import names
+from sim.errors import ConfigError
 from sim.poses import GRASP_HEIGHT, put_in_hand, solve_tcp_pose
 from sim.scene import SceneConfig, build_scene
 from tasks.arm_checks import controller_config
 from tasks.cell_runtime import CellRuntime
 from tasks.episode_config import Outcome
-from tasks.insertion import InsertionResult, insert
+from tasks.insertion import InsertionConfig, InsertionResult, insert
 
 HOLE = 14
 
@@ -44,3 +45,16 @@ def test_journal_beyond_the_chamfer_does_not_enter(offset):
     assert result.outcome is Outcome.ALIGN_FAIL, result.reason
     assert abs(result.lateral_misalignment_mm - offset * 1e3) < 0.05
     assert result.depth_shortfall_mm > 1.4  # the whole journal stayed out
+
+
+def test_the_push_ramps_from_the_contact_threshold_to_f_d():
+    cfg = InsertionConfig(force_n=5.0, contact_n=1.0, force_ramp_s=0.3)
+    assert cfg.push_at(0.0) == pytest.approx(1.0)
+    assert cfg.push_at(0.15) == pytest.approx(3.0)
+    assert cfg.push_at(0.3) == cfg.push_at(2.0) == 5.0
+    assert InsertionConfig(force_ramp_s=0.0).push_at(0.0) == 5.0  # 0: the old step
+
+
+def test_a_negative_ramp_is_refused():
+    with pytest.raises(ConfigError, match="force_ramp_s"):
+        InsertionConfig(force_ramp_s=-0.1)

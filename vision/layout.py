@@ -85,3 +85,25 @@ def plate_layout(cfg: SceneConfig = NOMINAL_CELL, travel: float = 0.015) -> Plat
     """Nominal plate frame from the cell layout: Stewart base + home height + platform disc."""
     x, y, z = cfg.stewart_base
     return PlateLayout((x, y, z + cfg.stewart.home_z + cfg.stewart.platform_thickness), travel=travel)
+
+
+
+def plate_in_view(layout: PlateLayout, plate: BaseplateConfig, base_T_plate: Vec, holes_in_plate: Vec,
+                  cameras: tuple[CameraModel, ...], above: float, margin: float = 0.02) -> bool:
+    """Whether :func:`vision.plate.locate_holes` can see every hole of the plate at
+    `base_T_plate` (4x4, plate frame in the base frame): each hole entry (`holes_in_plate`,
+    (N, 3) in the plate frame), and the top of a part seated in it (`above` higher), inside the
+    layout's search regions and inside every camera's image by `margin` of the image width.
+    A plate the platform has carried to present a far hole can fail this."""
+    rot, t = base_T_plate[:3, :3], base_T_plate[:3, 3]
+    entries = np.asarray(holes_in_plate) @ rot.T + t
+    tops = entries + above * rot[:, 2]
+    if not (layout.region(plate).contains(entries).all()
+            and layout.region(plate, above=above).contains(tops).all()):
+        return False
+    for cam in cameras:
+        uv = cam.project(np.r_[entries, tops])
+        pad = margin * cam.size[0]
+        if not np.all((uv > pad) & (uv < np.asarray(cam.size) - pad)):
+            return False
+    return True
