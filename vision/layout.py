@@ -87,7 +87,6 @@ def plate_layout(cfg: SceneConfig = NOMINAL_CELL, travel: float = 0.015) -> Plat
     return PlateLayout((x, y, z + cfg.stewart.home_z + cfg.stewart.platform_thickness), travel=travel)
 
 
-
 def plate_in_view(layout: PlateLayout, plate: BaseplateConfig, base_T_plate: Vec, holes_in_plate: Vec,
                   cameras: tuple[CameraModel, ...], above: float, margin: float = 0.02) -> bool:
     """Whether :func:`vision.plate.locate_holes` can see every hole of the plate at
