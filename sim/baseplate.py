@@ -86,7 +86,7 @@ def build_baseplate_spec(
         size=[half_x + 0.004, half_y + 0.004, h / 2], pos=[0, 0, -h / 2], rgba=list(FIXTURE_RGBA),
     )
     fixture.mass = 0.8
-    collision.plate_surface(fixture)  # no plate geom may touch a locked part (sim.seat_lock)
+    collision.plate_surface(fixture)  # a part's body meets the seat box only
 
     def plate_geom(geom: mujoco.MjsGeom) -> None:
         geom.rgba = list(PLATE_RGBA)

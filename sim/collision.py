@@ -19,11 +19,6 @@ import mujoco
 
 DEFAULT = 1
 _SEAT = 2
-_LOCKED = 4
-
-SEATED_LOCKED = (_LOCKED, DEFAULT | _SEAT)
-"""contype, conaffinity of a part welded in its hole (sim.seat_lock): no plate geom touches it
-(they have contype 0 and no _LOCKED affinity), the hand, held parts and conductor bodies do."""
 
 SEAT_GROUP = 3
 """Geom group of the seat box: hidden in renders (MuJoCo shows groups 0-2 by default)."""
@@ -36,7 +31,7 @@ def conductor_body(geom: mujoco.MjsGeom) -> None:
 
 def plate_surface(geom: mujoco.MjsGeom) -> None:
     """A plate bar, bore facet or the fixture: touches everything default except conductor
-    bodies and locked parts."""
+    bodies."""
     geom.contype, geom.conaffinity = 0, DEFAULT
 
 

@@ -7,6 +7,7 @@ Stewart platform's fixture site.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import mujoco
@@ -20,9 +21,9 @@ from sim.calibration_board import CheckerboardConfig, add_board
 from sim.cameras import DEFAULT_PAIRS, SENSOR_PIXELS, StereoPairConfig, add_stereo_pair
 from sim.conductor import ConductorConfig, build_conductor_spec
 from sim.contact import add_plate_contact_sensor
-from sim.errors import ConfigError
+from sim.errors import ConfigError, SimError
 from sim.physics import PhysicsConfig
-from sim.seat_lock import PLATE_BODY, add_seat_locks
+from sim.seat_lock import PLATE_BODY
 from sim.stewart import StewartConfig, build_stewart_spec, home_strokes
 from sim.tolerances import DISTRIBUTIONS, DrawnDiameters, draw_diameters
 from sim.tray import TrayConfig, build_tray_spec
@@ -156,12 +157,33 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
         part = build_conductor_spec(diameters.journals[k], diameters.bodies[k], cfg.conductor, cfg.physics)
         px, py = pockets[k]
         spec.attach(part, prefix=names.conductor(k), frame=world.add_frame(pos=[tx + px, ty + py, top]))
-    add_seat_locks(spec, cfg.n_conductors)
     if cfg.n_conductors:
         add_plate_contact_sensor(spec, f"{names.conductor(0)}conductor", PLATE_BODY)
     for pair in cfg.stereo_pairs:
         add_stereo_pair(spec, pair)
     return spec, diameters
+
+
+_SHIFTING = (names.TRAY, "conductor")
+"""Name starts of the bodies whose ids a recompile may shift (see :meth:`Scene.recompile`)."""
+_COUNTS = {mujoco.mjtObj.mjOBJ_BODY: "nbody", mujoco.mjtObj.mjOBJ_JOINT: "njnt", mujoco.mjtObj.mjOBJ_GEOM: "ngeom",
+           mujoco.mjtObj.mjOBJ_SITE: "nsite", mujoco.mjtObj.mjOBJ_ACTUATOR: "nu",
+           mujoco.mjtObj.mjOBJ_SENSOR: "nsensor", mujoco.mjtObj.mjOBJ_CAMERA: "ncam"}
+
+
+def _fixed_ids(model: mujoco.MjModel) -> dict[tuple[mujoco.mjtObj, str], int]:
+    """Ids of every named element outside the tray and the conductors."""
+    out = {}
+    for kind, count in _COUNTS.items():
+        for i in range(getattr(model, count)):
+            name = mujoco.mj_id2name(model, kind, i) or ""
+            if name and not name.startswith(_SHIFTING):
+                out[(kind, name)] = i
+    return out
+
+
+def _conductor_bodies(model: mujoco.MjModel, n: int) -> np.ndarray:
+    return np.array([model.body(f"{names.conductor(k)}conductor").id for k in range(n)], dtype=int)
 
 
 @dataclass
@@ -179,6 +201,27 @@ class Scene:
     leg_actuators: np.ndarray
     hole_sites: np.ndarray
     conductor_bodies: np.ndarray
+    on_recompile: list[Callable[[Scene], None]] = field(default_factory=list)
+    """Called after :meth:`recompile` with the scene: holders of the old model or data rebind."""
+
+    def recompile(self) -> None:
+        """Compile the edited spec and carry the state over (MjSpec.recompile maps joints,
+        controls and activations by name, and keeps the time). `model` and `data` are new
+        objects afterwards. Only the tray's and the conductors' ids may move (a conductor body
+        moved into the plate); a change that shifts any other id, which controllers and
+        recorders hold, raises SimError."""
+        before = _fixed_ids(self.model)
+        model, data = self.spec.recompile(self.model, self.data)
+        after = _fixed_ids(model)
+        if after != before:
+            moved = sorted(name for (kind, name), i in before.items() if after.get((kind, name)) != i)
+            raise SimError(f"recompiling moved the ids of {len(moved)} elements outside the tray and "
+                           f"conductors (e.g. {moved[:3]}): controllers hold those ids")
+        self.model, self.data = model, data
+        self.conductor_bodies = _conductor_bodies(model, self.config.n_conductors)
+        mujoco.mj_forward(model, data)
+        for hook in self.on_recompile:
+            hook(self)
 
     def reset(self) -> None:
         """Home state: arm in its ready pose, Stewart at home, conductors in the tray."""
@@ -219,7 +262,7 @@ def build_scene(cfg: SceneConfig = SceneConfig()) -> Scene:
     arm_act = np.array([model.actuator(names.ARM + a).id for a in ACTUATOR_NAMES])
     legs = np.array([model.actuator(f"{names.STEWART}leg{i}").id for i in range(1, 7)])
     holes = np.array([model.site(f"{names.PLATE}hole{k}").id for k in range(cfg.baseplate.n_holes)])
-    bodies = np.array([model.body(f"{names.conductor(k)}conductor").id for k in range(cfg.n_conductors)])
+    bodies = _conductor_bodies(model, cfg.n_conductors)
     scene = Scene(cfg, spec, model, data, diameters, arm_adr, arm_dof, arm_act, legs, holes, bodies)
     scene.reset()
     return scene

@@ -1,87 +1,86 @@
-"""Seated parts ride on the plate as one rigid piece once their hole has been scored.
+"""Seated parts become part of the plate once their hole has been scored.
 
 A journal seated in its H7/h6 bore, shoulder on the plate top, is held by the fit and by
-gravity; nothing in the cell pushes it again. Simulated with its contacts, though, each seated
-part costs ~0.3 ms per step (journal against 16 bore facets, shoulder on the seat box) every
-time the platform moves and wakes it, so the late holes of a 36-hole episode cost 3-5x the
-first. After a hole is scored *success* (the insertion itself is fully physical), the part is
-welded to the plate where it physically ended up, and only its contacts with the plate are
-switched off: the gripper, a held part or a neighbour still collide with it (they meet a
-rigidly held part instead of one that could wiggle inside 0-16 um of clearance).
+gravity; nothing in the cell pushes it again. Simulated as a free body, though, each seated
+part rides in the Stewart platform's island: with its contacts it cost ~0.3 ms per step, and
+welded to the plate (an equality constraint, serpar before session 14) still 12 us per step
+per part, mostly in MuJoCo's no-slip pass, which works on every constraint row of the awake
+island: with 36 welded parts a control period cost 5.4 ms against 1.1 ms for the bare
+platform moving (measured, 5 mm platform ramp).
 
-Every conductor has an inactive weld ``seat_lock<k>`` to the baseplate, built with the scene;
-:func:`lock_seated` sets its relative pose to the current one and activates it, and
-:func:`is_locked` says which are active.
+So after a hole is scored *success* (the insertion itself is fully physical), the part's body
+is moved in the scene's MjSpec from the world to the plate, at the pose it physically ended
+up in, without its free joint, and the scene is recompiled (MjSpec.recompile carries the state
+of every other joint over; ~30 ms). The part then costs what a plate geom costs. Bodies
+welded to one another never collide in MuJoCo, so the part stops touching the plate and its
+seated neighbours; the hand and parts still in the tray or in the hand meet it as before.
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import mujoco
 import numpy as np
 
-from sim import collision, names
+from sim import names
 from sim.errors import SimError
 
+if TYPE_CHECKING:
+    from sim.scene import Scene
+
 PLATE_BODY = names.PLATE + "baseplate"
-WELD_SOLREF = (0.0005, 1.0)
-"""Stiff: 0.5 ms (5 physics steps), critically damped."""
-WELD_SOLIMP = (0.99, 0.99, 0.001, 0.5, 2.0)
-"""Impedance 0.99: a soft constraint yields (1 - d)/d of its load. With these, a locked part
-sags 0.025 um under its weight and moves 0.12 um against the plate during an abrupt 3 mm
-platform lift (tests/test_seat_lock; 0.39 / 1.5 um at 2 ms)."""
+_COPY = "_seated"
+"""Suffix of the copy while the original still exists (MjSpec attaches copies, not moves)."""
+_REFERRING = ("sensors", "equalities", "excludes", "pairs", "tendons", "actuators")
+_NAME_FIELDS = ("name", "objname", "refname", "name1", "name2", "bodyname1", "bodyname2", "geomname1",
+                "geomname2", "target")
+"""The name, and the fields in which an element names another."""
 
 
-def lock_name(k: int) -> str:
-    return f"seat_lock{k}"
+def part_body(k: int) -> str:
+    return f"{names.conductor(k)}conductor"
 
 
-def add_seat_locks(spec: mujoco.MjSpec, n_conductors: int) -> None:
-    """One inactive weld per conductor to the baseplate (the relative pose is set on locking)."""
-    for k in range(n_conductors):
-        spec.add_equality(name=lock_name(k), type=mujoco.mjtEq.mjEQ_WELD,
-                          objtype=mujoco.mjtObj.mjOBJ_BODY,
-                          name1=PLATE_BODY, name2=f"{names.conductor(k)}conductor",
-                          active=False, solref=list(WELD_SOLREF), solimp=list(WELD_SOLIMP))
-
-
-def _weld_id(model: mujoco.MjModel, k: int) -> int:
-    eq = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, lock_name(k))
-    if eq < 0:
-        raise SimError(f"the scene has no {lock_name(k)}: conductor {k} out of range "
-                       f"(the scene has {model.neq} equality constraints)")
-    return eq
-
-
-def lock_seated(model: mujoco.MjModel, data: mujoco.MjData, k: int) -> None:
-    """Weld conductor k to the plate at its current relative pose; stop its plate contacts.
-
-    Changes ``model`` (the weld's relative pose and the part's collision bits) and ``data``
-    (eq_active): a model shared between episodes must not be locked."""
-    eq = _weld_id(model, k)
-    b1, b2 = int(model.eq_obj1id[eq]), int(model.eq_obj2id[eq])
+def _pose_in_plate(model: mujoco.MjModel, data: mujoco.MjData, body: int) -> tuple[np.ndarray, np.ndarray]:
+    plate = model.body(PLATE_BODY).id
     mujoco.mj_kinematics(model, data)
-    # MuJoCo's weld holds  x1 + R1 relpos = x2 + R2 anchor  and the orientation of body 2
-    # relative to body 1 at relquat = q1^-1 q2 (checked: zero residual rows on locking):
-    # anchor 0 on body 2 (the part: the weld acts at the part, not at the plate's centre up to
-    # 35 mm away, where the part's weight would be a lever), relpos and relquat from now.
-    rot1 = data.xmat[b1].reshape(3, 3)
-    relpos = rot1.T @ (data.xpos[b2] - data.xpos[b1])
-    relquat = np.zeros(4)
-    inv1 = np.zeros(4)
-    mujoco.mju_negQuat(inv1, data.xquat[b1])
-    mujoco.mju_mulQuat(relquat, inv1, data.xquat[b2])
-    model.eq_data[eq, 0:3] = 0.0
-    model.eq_data[eq, 3:6] = relpos
-    model.eq_data[eq, 6:10] = relquat
-    model.eq_data[eq, 10] = 1.0  # torquescale
-    for g in range(int(model.body_geomadr[b2]), int(model.body_geomadr[b2] + model.body_geomnum[b2])):
-        model.geom_contype[g], model.geom_conaffinity[g] = collision.SEATED_LOCKED
-    # The body-level bits too (compiled as the OR over the body's geoms): MuJoCo's broad phase
-    # then drops the part/plate pair before walking the plate's 600-geom tree for it, which
-    # cost ~20 us per locked part per step while the platform was awake.
-    model.body_contype[b2], model.body_conaffinity[b2] = collision.SEATED_LOCKED
-    data.eq_active[eq] = 1
+    rot = data.xmat[plate].reshape(3, 3)
+    pos = rot.T @ (data.xpos[body] - data.xpos[plate])
+    inv, quat = np.zeros(4), np.zeros(4)
+    mujoco.mju_negQuat(inv, data.xquat[plate])
+    mujoco.mju_mulQuat(quat, inv, data.xquat[body])
+    return pos, quat
 
 
-def is_locked(model: mujoco.MjModel, data: mujoco.MjData, k: int) -> bool:
-    return bool(data.eq_active[_weld_id(model, k)])
+def lock_seated(scene: Scene, k: int) -> None:
+    """Make conductor k a rigid part of the plate where it is now; recompiles `scene` (its model
+    and data are new objects afterwards: see :meth:`sim.scene.Scene.recompile`)."""
+    if not 0 <= k < scene.config.n_conductors:
+        raise SimError(f"conductor {k} out of range: the scene has conductors 0..{scene.config.n_conductors - 1}")
+    if is_locked(scene, k):
+        raise SimError(f"conductor {k} is already locked in the plate")
+    spec, m, d = scene.spec, scene.model, scene.data
+    pos, quat = _pose_in_plate(m, d, m.body(part_body(k)).id)
+    original = spec.body(part_body(k))
+    spec.copy_during_attach = True
+    frame = spec.body(PLATE_BODY).add_frame(pos=pos.tolist(), quat=quat.tolist())
+    copy = frame.attach_body(original, "", _COPY)
+    spec.delete(original)
+    for joint in list(copy.joints):  # the free joint
+        spec.delete(joint)
+    # Deleting the original deleted what referred to it (the plate contact sensor); the attach
+    # had copied those too, referring to the copy: they take the originals' names back.
+    referring = [e for kind in _REFERRING for e in getattr(spec, kind) if e.name.endswith(_COPY)]
+    for element in (copy, *copy.geoms, *copy.sites, *referring):
+        for field in _NAME_FIELDS:
+            value = getattr(element, field, None)
+            if isinstance(value, str) and value.endswith(_COPY):
+                setattr(element, field, value.removesuffix(_COPY))
+    scene.recompile()
+
+
+def is_locked(scene: Scene, k: int) -> bool:
+    """Whether conductor k is part of the plate."""
+    m = scene.model
+    return m.body(int(m.body(part_body(k)).parentid[0])).name == PLATE_BODY

@@ -9,7 +9,6 @@ servos in MuJoCo itself. Motion primitives (`tasks.motions`) drive it.
 from __future__ import annotations
 
 import math
-
 from collections.abc import Callable
 from dataclasses import dataclass, field
 

@@ -125,6 +125,10 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
                                    name=f"episode_{cfg.seed}")
         rt.observers.append(recorder)
         camera.on_frames = recorder.frames
+    rebind = [lambda scene: camera.rebind(scene.model), lambda scene: rt.reset_health()]
+    if recorder is not None:
+        rebind.append(recorder.rebind)
+    rt.scene.on_recompile.extend(rebind)
     law = ControlLaw.FORCE_POSITION if cfg.controller == "force_position" else ControlLaw.IMPEDANCE
     cycle = HoleCycle(rt, plate, camera, pairs, cfg, law)
     counts = {o.value: 0 for o in Outcome}
@@ -157,6 +161,8 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
             if on_record:
                 on_record(record)
     finally:
+        for hook in rebind:
+            rt.scene.on_recompile.remove(hook)
         camera.close()
         if recorder is not None:  # also after an error: the recording shows how it got there
             rt.observers.remove(recorder)

@@ -18,9 +18,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from sim import names
 from sim.contact import ContactForceProbe
 from sim.recording import PhaseSegment, Recording, RecordingMeta, SignalRecorder, write_recording
+from sim.scene import Scene
+from sim.seat_lock import PLATE_BODY
 from tasks.cell_runtime import CellRuntime
 
 POSE_HZ = 50.0
@@ -62,6 +63,14 @@ NOTES = {
 }
 
 
+def _plate_load_probe(scene: Scene) -> ContactForceProbe:
+    """Contact force on the plate from the conductors."""
+    m = scene.model
+    plate = np.flatnonzero(m.geom_bodyid == m.body(PLATE_BODY).id)
+    parts = np.flatnonzero(np.isin(m.geom_bodyid, scene.conductor_bodies))
+    return ContactForceProbe(m, plate, parts)
+
+
 class EpisodeRecorder:
     """Attach with ``rt.observers.append(recorder)`` (and ``camera.on_frames = recorder.frames``);
     :meth:`close` writes signals, meta.json and the rerun file into `folder`."""
@@ -84,9 +93,7 @@ class EpisodeRecorder:
         self._fingers = tuple(int(a) for a in rt.gripper.finger_qpos)
         base = rt.stewart.base_body  # welded to the world: its frame is read once
         self._base_rt, self._base_pos = d.xmat[base].reshape(3, 3).T.copy(), d.xpos[base].copy()
-        plate = np.flatnonzero(m.geom_bodyid == m.body(names.PLATE + "baseplate").id)
-        parts = np.flatnonzero(np.isin(m.geom_bodyid, rt.scene.conductor_bodies))
-        self._plate_load = ContactForceProbe(m, plate, parts)  # on the plate, from the conductors
+        self._plate_load = _plate_load_probe(rt.scene)
         self._t_prev, self._offset, self._last = rt.time, 0.0, -np.inf
         self._phase_names: list[str] = []
         self._phase_starts: list[float] = []
@@ -97,6 +104,11 @@ class EpisodeRecorder:
         self._poses = rerun_scene.PoseTrack(self._rec, m, d)
         self._sample_plant()
         self._poses.sample(d, rt.time)
+
+    def rebind(self, scene: Scene) -> None:
+        """After the scene was recompiled (a seated part moved into the plate)."""
+        self._plate_load = _plate_load_probe(scene)
+        self._poses.rebind(scene.model)
 
     # --- the 1 kHz path ------------------------------------------------------------------
     def __call__(self, rt: CellRuntime) -> None:

@@ -273,7 +273,7 @@ class HoleCycle:
         self._enter("release")
         release(rt, body)
         if result.outcome is Outcome.SUCCESS:  # scored: from here the part rides with the plate
-            lock_seated(rt.scene.model, d, self.conductor)
+            lock_seated(rt.scene, self.conductor)
         diam = rt.scene.diameters
         clearance = 1e6 * (diam.holes[self.hole] - diam.journals[self.conductor])
         return CycleResult(self.hole, self.conductor, result.outcome, result.reason, result.peak_force_n,

@@ -103,15 +103,20 @@ class PoseTrack:
     """World poses of the moving bodies, sampled by the caller's clock, sent as columns."""
 
     def __init__(self, rec: rr.RecordingStream, model: mujoco.MjModel, data: mujoco.MjData) -> None:
-        self.model = model
         moving = (model.body_weldid != 0) | (model.body_mocapid >= 0)
         self.bodies = np.flatnonzero(moving)
+        self.names = [model.body(b).name for b in self.bodies]
+        self.paths = [body_path(model, b) for b in self.bodies]
         for b in np.flatnonzero(~moving):
             rec.log(body_path(model, b), rr.Transform3D(translation=data.xpos[b], quaternion=xyzw(data.xquat[b])),
                     static=True)
         self._t: list[float] = []
         self._pos: list[np.ndarray] = []
         self._quat: list[np.ndarray] = []
+
+    def rebind(self, model: mujoco.MjModel) -> None:
+        """Follow the same bodies in a recompiled model (their ids may have moved)."""
+        self.bodies = np.array([model.body(name).id for name in self.names])
 
     def sample(self, data: mujoco.MjData, t: float) -> None:
         self._t.append(t)
@@ -124,10 +129,10 @@ class PoseTrack:
             return
         t = np.asarray(self._t)
         pos, quat = np.stack(self._pos, axis=1), xyzw(np.stack(self._quat, axis=1))
-        for k, b in enumerate(self.bodies):
+        for k, path in enumerate(self.paths):
             keep = np.ones(len(t), bool)
             keep[1:] = np.any(pos[k, 1:] != pos[k, :-1], axis=1) | np.any(quat[k, 1:] != quat[k, :-1], axis=1)
-            rec.send_columns(body_path(self.model, b), [rr.TimeColumn(TIMELINE, duration=t[keep])],
+            rec.send_columns(path, [rr.TimeColumn(TIMELINE, duration=t[keep])],
                              rr.Transform3D.columns(translation=pos[k, keep], quaternion=quat[k, keep]))
 
 

@@ -110,5 +110,10 @@ class Camera:
             self.on_frames(shot)
         return shot
 
+    def rebind(self, model: mujoco.MjModel) -> None:
+        """Shoot a recompiled model from now on (new GL contexts on the next shot)."""
+        self._renderer.close()
+        self.model, self._renderer = model, CameraRenderer(model)
+
     def close(self) -> None:
         self._renderer.close()
