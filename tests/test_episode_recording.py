@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 from sim.recording import check_channels, read_recording
+from sim.seat_lock import lock_seated
 from tasks.episode import _Snapshot, build_runtime
 from tasks.episode_config import EpisodeConfig
 from tasks.episode_recorder import CHANNELS, RRD_NAME, EpisodeRecorder
+from tasks.vision_scenes import seat_conductor
 from vision.imaging import Camera, ImagingConfig
 
 STEP = 2 * np.pi / 2**20
@@ -21,18 +23,26 @@ STEP = 2 * np.pi / 2**20
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
+    """0.1 s settling with conductor 0 in hole 0, which is then locked into the plate (a
+    recompile: new model and data) and the platform nudged up 20 um; a top shot; 0.05 s of
+    moving, a snapshot restore, 0.05 s more."""
     cfg = EpisodeConfig(stewart_calibration="none")
     rt, plate = build_runtime(cfg)
-    d = rt.scene.data
-    truth: dict[float, np.ndarray] = {rt.time: d.qpos[rt.scene.arm_qpos_adr].copy()}
+    seat_conductor(rt.scene, 0, 0)
+    truth: dict[float, np.ndarray] = {rt.time: rt.scene.data.qpos[rt.scene.arm_qpos_adr].copy()}
     recorder = EpisodeRecorder(rt, tmp_path_factory.mktemp("rec") / "episode_0",
                                {"episode_config": dataclasses.asdict(cfg)})
-    rt.observers += [recorder, lambda r: truth.setdefault(r.time, d.qpos[r.scene.arm_qpos_adr].copy())]
+    rt.observers += [recorder,
+                     lambda r: truth.setdefault(r.time, r.scene.data.qpos[r.scene.arm_qpos_adr].copy())]
     camera = Camera(rt.scene.model, ImagingConfig.ideal(1024))
     camera.on_frames = recorder.frames
+    rt.scene.on_recompile += [recorder.rebind, lambda scene: camera.rebind(scene.model)]
     rt.phase = "settle"
     rt.run(0.1)
-    camera.shoot(d, ("top_left", "top_right"))
+    lock_seated(rt.scene, 0)
+    legs = list(rt.stewart.actuator_ids)
+    rt.stewart.command_strokes(rt.scene.data, rt.scene.data.ctrl[legs] + 2e-5)
+    camera.shoot(rt.scene.data, ("top_left", "top_right"))
     snap, t_restore = _Snapshot(rt, plate), rt.time
     rt.phase = "move"
     rt.run(0.05)
@@ -102,6 +112,9 @@ def test_rrd_opens_in_the_rerun_sdk(recorded):
     assert rows["/cell/cameras/top_left"] >= 1 and rows["/cell/cameras/top_right"] >= 1
     assert rows["/phase"] == 2  # one annotation per phase change
     assert rows["/cell/arm/link7"] >= 9  # 50 Hz body poses over 0.2 s
+    # The part locked into the plate mid-recording is followed under its new body id: it moves
+    # when, and only when, the plate does.
+    assert rows["/cell/conductor0/conductor"] == rows["/cell/plate/baseplate"] > 1
     paths = set(RrdReader(path).store().schema().entity_paths())
     assert "/cell/arm/link0" in paths  # a static body, posed once
     assert any(p.startswith("/cell/plate/baseplate/geoms/") for p in paths)  # the static scene
