@@ -158,7 +158,7 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
         px, py = pockets[k]
         spec.attach(part, prefix=names.conductor(k), frame=world.add_frame(pos=[tx + px, ty + py, top]))
     if cfg.n_conductors:
-        add_plate_contact_sensor(spec, f"{names.conductor(0)}conductor", PLATE_BODY)
+        add_plate_contact_sensor(spec, names.conductor_body(0), PLATE_BODY)
     for pair in cfg.stereo_pairs:
         add_stereo_pair(spec, pair)
     return spec, diameters
@@ -183,7 +183,7 @@ def _fixed_ids(model: mujoco.MjModel) -> dict[tuple[mujoco.mjtObj, str], int]:
 
 
 def _conductor_bodies(model: mujoco.MjModel, n: int) -> np.ndarray:
-    return np.array([model.body(f"{names.conductor(k)}conductor").id for k in range(n)], dtype=int)
+    return np.array([model.body(names.conductor_body(k)).id for k in range(n)], dtype=int)
 
 
 @dataclass

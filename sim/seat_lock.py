@@ -11,7 +11,7 @@ platform moving (measured, 5 mm platform ramp).
 So after a hole is scored *success* (the insertion itself is fully physical), the part's body
 is moved in the scene's MjSpec from the world to the plate, at the pose it physically ended
 up in, without its free joint, and the scene is recompiled (MjSpec.recompile carries the state
-of every other joint over; ~30 ms). The part then costs what a plate geom costs. Bodies
+of every other joint over; ~50 ms with the id check). The part then costs what a plate geom costs. Bodies
 welded to one another never collide in MuJoCo, so the part stops touching the plate and its
 seated neighbours; the hand and parts still in the tray or in the hand meet it as before.
 """
@@ -38,10 +38,6 @@ _NAME_FIELDS = ("name", "objname", "refname", "name1", "name2", "bodyname1", "bo
 """The name, and the fields in which an element names another."""
 
 
-def part_body(k: int) -> str:
-    return f"{names.conductor(k)}conductor"
-
-
 def _pose_in_plate(model: mujoco.MjModel, data: mujoco.MjData, body: int) -> tuple[np.ndarray, np.ndarray]:
     plate = model.body(PLATE_BODY).id
     mujoco.mj_kinematics(model, data)
@@ -61,8 +57,8 @@ def lock_seated(scene: Scene, k: int) -> None:
     if is_locked(scene, k):
         raise SimError(f"conductor {k} is already locked in the plate")
     spec, m, d = scene.spec, scene.model, scene.data
-    pos, quat = _pose_in_plate(m, d, m.body(part_body(k)).id)
-    original = spec.body(part_body(k))
+    pos, quat = _pose_in_plate(m, d, m.body(names.conductor_body(k)).id)
+    original = spec.body(names.conductor_body(k))
     spec.copy_during_attach = True
     frame = spec.body(PLATE_BODY).add_frame(pos=pos.tolist(), quat=quat.tolist())
     copy = frame.attach_body(original, "", _COPY)
@@ -83,4 +79,4 @@ def lock_seated(scene: Scene, k: int) -> None:
 def is_locked(scene: Scene, k: int) -> bool:
     """Whether conductor k is part of the plate."""
     m = scene.model
-    return m.body(int(m.body(part_body(k)).parentid[0])).name == PLATE_BODY
+    return m.body(int(m.body(names.conductor_body(k)).parentid[0])).name == PLATE_BODY
