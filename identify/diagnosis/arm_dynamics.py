@@ -49,10 +49,17 @@ SCALE_MIN_RMS = 1.0
 class ArmDynamicsConfig:
     smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
     block_s: float = BLOCK_S
+    tare_knot_s: float | None = None
+    """None: one constant tare per torque sensor. A spacing [s]: each sensor's tare is a
+    piecewise-linear function of time with knots this far apart (the baseline then has 7 values
+    per knot), for recordings long enough that the sensor zero's random walk shows."""
 
     def __post_init__(self) -> None:
         if not self.block_s > 0:
             raise IdentificationError(f"ArmDynamicsConfig.block_s={self.block_s} must be > 0")
+        if self.tare_knot_s is not None and not self.tare_knot_s > 0:
+            raise IdentificationError(f"ArmDynamicsConfig.tare_knot_s={self.tare_knot_s} must be "
+                                      "> 0 or None")
 
 
 class ArmDynamicsFamily:
@@ -64,6 +71,9 @@ class ArmDynamicsFamily:
                  phases: tuple[tuple[str, float, float], ...] = ()) -> None:
         self.terms, self.cfg = terms, cfg
         self.baseline: Effect | None = BASELINE
+        self._knots: Vec | None = None
+        if cfg.tare_knot_s is not None:
+            self.pin_tare_knots(np.arange(len(terms.time)))
         self.effects: tuple[Effect, ...] = EFFECTS
         self.n_samples = len(terms.time)
         self._models = EffectModels(terms, dynamics)
@@ -77,7 +87,7 @@ class ArmDynamicsFamily:
         link_model, drive_model, band = self._models.contributions(params, rows)
         link = t.link[rows] - link_model
         if BASELINE.name in params:
-            link = link - params[BASELINE.name]
+            link = link - self._tare(params[BASELINE.name], rows)
         drive = t.drive[rows] - drive_model
         # stiction: within the band the drive's residual is static friction, not a misfit
         drive = np.sign(drive) * np.maximum(np.abs(drive) - band, 0.0)
@@ -110,6 +120,21 @@ class ArmDynamicsFamily:
                 m = mask[rows] if mask.ndim == 1 else mask[rows, j]
                 groups.append((channel, group, label, w[m, c]))
         return locate_rows(groups)
+
+    def pin_tare_knots(self, train: NDArray[np.int64]) -> None:
+        """Keep the drifting tare's knots that training rows pin (a row within one spacing):
+        a knot only held-out rows could fix would be a free parameter fitted on nothing."""
+        if self.cfg.tare_knot_s is not None:
+            self._knots, self.baseline = drifting_tare(self.terms.time, self.terms.time[train],
+                                                       self.cfg.tare_knot_s)
+
+    def _tare(self, values: Vec, rows: NDArray[np.int64]) -> Vec:
+        """Per-row tares (rows, 7): constant, or interpolated between the knots."""
+        if self._knots is None:
+            return values
+        table = values.reshape(len(self._knots), 7)
+        t = self.terms.time[rows]
+        return np.stack([np.interp(t, self._knots, table[:, j]) for j in range(7)], axis=1)
 
     # -- where -----------------------------------------------------------------------------
     def _regime_masks(self) -> dict[tuple[str, str], NDArray[np.bool_]]:
@@ -150,6 +175,19 @@ def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None
     check_scale(terms)
     phases = tuple((p.name, p.start, p.end) for p in rec.meta.phases)
     return ArmDynamicsFamily(terms, dynamics, cfg, phases)
+
+
+def drifting_tare(time: Vec, pinned_by: Vec, spacing_s: float) -> tuple[Vec, Effect]:
+    """Knot times (every ``spacing_s`` from the first row, each with a ``pinned_by`` time
+    within one spacing) and the baseline Effect of a piecewise-linear tare per sensor
+    (constant beyond the end knots)."""
+    grid = time[0] + spacing_s * np.arange(int(np.ceil((time[-1] - time[0]) / spacing_s)) + 1)
+    near = np.abs(grid[:, None] - pinned_by[None, :]).min(axis=1) < spacing_s
+    knots = grid[near]
+    names = tuple(f"tare{j}@{t - time[0]:.0f}s" for t in knots for j in range(1, 8))
+    k = len(names)
+    return knots, Effect(BASELINE.name, "torque sensor offsets (tares), drifting in time", names,
+                         ("N m",) * k, np.zeros(k), np.full(k, -20.0), np.full(k, 20.0))
 
 
 def check_scale(terms: Terms) -> None:

@@ -37,8 +37,9 @@ def load_for_diagnosis(path: str | Path) -> Recording:
 
 
 def family_from_recording(rec: Recording) -> Family:
-    """The static arm family when the recording has measurements, else the arm-dynamics
-    family when it has the arm's joint signals, else the Stewart family when it has Stewart
+    """The static arm family when the recording has measurements, else the episode family
+    for an assembly episode (``serpar run --record``), else the arm-dynamics family when it has
+    the arm's joint signals, else the Stewart family when it has Stewart
     leg or platform channels; else one line saying what is needed."""
     if rec.measurements is not None and rec.measurements.num_rows > 0:
         from identify.diagnosis.arm_static import family_from_data
@@ -47,6 +48,13 @@ def family_from_recording(rec: Recording) -> Family:
         return family_from_data(static_data(rec))
     cols = set(rec.signals.column_names)
     if rec.signals.num_rows > 0 and set(DYNAMICS_CHANNELS) <= cols:
+        from identify.diagnosis.episode import is_episode
+
+        if is_episode(rec):
+            # --- an assembly episode: arm dynamics over its free-motion phases (episode.py)
+            from identify.diagnosis.episode import family_from_recording as episode_family
+
+            return episode_family(rec)
         # --- arm dynamics time series (identify/diagnosis/arm_dynamics.py, a sibling domain)
         from identify.diagnosis.arm_dynamics import family_from_recording as dynamics_family
 

@@ -1,0 +1,91 @@
+"""Diagnosis of an assembly episode (issue 7): a recorded one-hole episode of the full cell,
+diagnosed blind from its arm signals. The cell's arm has the Panda's dry joint friction
+(``EpisodeConfig.arm_friction`` x Gaz et al.'s levels, MuJoCo frictionloss) that the
+controllers' model leaves out; the diagnosis must name it and recover it from the free-motion
+phases, with the contact phases (grasp, insert, release) excluded and counted."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from diagnosis_support import RMS_TARGET
+
+from identify.diagnosis.choose import family_from_recording
+from identify.diagnosis.episode import EpisodeFamily, free_windows
+from identify.diagnosis.select import diagnose
+from sim.arm import PANDA_COULOMB_FRICTION
+from sim.recording import read_recording
+from tasks.episode import run_episode
+from tasks.episode_config import EpisodeConfig
+
+pytestmark = pytest.mark.xdist_group("calibrated")
+
+FRICTION_SCALE = {"friction": 0.3, "none": 0.0}
+"""Episode -> the arm's dry friction as a share of the Panda's (0.3 is the default cell)."""
+
+
+@pytest.fixture(scope="module")
+def episodes(calibrated_top, calibrated_inspect, tmp_path_factory):
+    pairs = {"top": calibrated_top.calibration.pair, "inspect": calibrated_inspect.calibration.pair}
+    out = {}
+    for name, scale in FRICTION_SCALE.items():
+        folder = tmp_path_factory.mktemp(name) / "episode"
+        cfg = EpisodeConfig(holes=(14,), stewart_calibration="none", arm_friction=scale)
+        summary = run_episode(cfg, pairs, recording=folder)
+        assert summary.successes == 1
+        rec = read_recording(folder)
+        # the truth stays out of what the diagnosis reads
+        model = {k: v for k, v in rec.meta.model.items() if k != "episode_config"}
+        rec = dataclasses.replace(rec, meta=dataclasses.replace(rec.meta, model=model))
+        family = family_from_recording(rec)
+        out[name] = (rec, family, diagnose(family, 0))
+    return out
+
+
+def test_an_episode_recording_is_diagnosed_by_the_episode_family(episodes) -> None:
+    for _, family, _ in episodes.values():
+        assert isinstance(family, EpisodeFamily)
+
+
+def test_contact_phases_are_excluded_and_counted(episodes) -> None:
+    rec, family, _ = episodes["friction"]
+    keep, excluded = free_windows(rec, family.inner)
+    assert len(keep) + sum(excluded.values()) == family.inner.n_samples  # nothing dropped silently
+    assert excluded["grasp"] > 20 and excluded["insert"] > 10 and excluded["release"] > 0
+    assert "insert" in family.kind and "grasp" in family.kind
+    phase_rows = {r.label for r in family.locate(np.arange(family.n_samples),
+                                                 np.zeros(family.n_samples * 14))
+                  if r.group == "phase"}
+    assert not phase_rows & {"grasp", "insert", "release"}
+
+
+def test_unmodelled_joint_friction_is_named_and_recovered(episodes) -> None:
+    _, _, diag = episodes["friction"]
+    assert diag.top_effect == "joint_friction", diag.verdict
+    finding = next(f for f in diag.findings if f.effect == "joint_friction")
+    fitted = {p.name: p.value for p in finding.params}
+    truth = 0.3 * np.array(PANDA_COULOMB_FRICTION)
+    got = np.array([fitted[f"Fc{j}"] for j in range(1, 8)])
+    assert np.all(np.abs(got - truth) <= 0.05 * truth), (got, truth)
+    assert diag.heldout_rms_before > 10.0  # the friction dominates the nominal residual
+
+
+def test_heldout_rms_after_the_fit_near_noise_floor(episodes) -> None:
+    _, _, diag = episodes["friction"]
+    assert diag.heldout_rms_after <= RMS_TARGET
+
+
+@pytest.mark.xfail(strict=True, reason="a frictionless episode reads ~1.3x noise before any "
+                                       "fit, most of it joints 2 and 4 in both channels; the "
+                                       "fit takes a -50 us 'latency' (the recorder's sampling "
+                                       "against the 0.1 ms step) and ~0 encoder offsets for it")
+def test_frictionless_episode_says_no_missing_physics(episodes) -> None:
+    _, _, diag = episodes["none"]
+    assert diag.no_missing_physics, diag.verdict
+
+
+def test_frictionless_episode_does_not_find_joint_friction(episodes) -> None:
+    _, _, diag = episodes["none"]
+    assert "joint_friction" not in {f.effect for f in diag.findings}, diag.verdict
