@@ -18,10 +18,12 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="write an HTML report (plots embedded) and OUT.model.json beside it "
                         "(Stewart geometry or encoder offsets: also OUT.stewart_params.json, "
                         "for serpar run's stewart_calibration)")
-    p.add_argument("--model", metavar="M.model.json",
-                   help="diagnose against a previous diagnosis's model file: its effects are "
-                        "fixed in the nominal prediction (default: the nominal arm); the "
-                        "written model is M's updated by what this recording shows")
+    p.add_argument("--model", metavar="M.model.json|CELL.yaml",
+                   help="diagnose against a previous diagnosis's model file, or against the "
+                        "cell an episode config (serpar run --config YAML) builds: its arm "
+                        "friction and plant model; their effects are fixed in the nominal "
+                        "prediction (default: the nominal arm); the written model is M's "
+                        "updated by what this recording shows")
     p.add_argument("--seed", type=int, default=0, help="seed of the train/held-out split "
                                                        "where the recording does not fix it")
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -74,10 +76,12 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     family = family_from_recording(rec)
     prior = None
     if args.model:
+        from identify.diagnosis.config_model import is_config_path, model_from_episode_config
         from identify.diagnosis.model_file import read_model_file
         from identify.diagnosis.prior import PriorFamily
 
-        family = prior = PriorFamily(family, read_model_file(args.model))
+        read = model_from_episode_config if is_config_path(args.model) else read_model_file
+        family = prior = PriorFamily(family, read(args.model))
     bar = progress(total=0, desc="diagnose", enabled=sys.stderr.isatty() and not args.json)
 
     def step(msg: str) -> None:

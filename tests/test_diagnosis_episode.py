@@ -13,9 +13,12 @@ import pytest
 from diagnosis_support import RMS_TARGET
 
 from identify.diagnosis.choose import family_from_recording
+from identify.diagnosis.config_model import model_from_episode_config
 from identify.diagnosis.episode import EpisodeFamily, free_windows
+from identify.diagnosis.prior import PriorFamily
 from identify.diagnosis.select import diagnose
 from sim.arm import PANDA_COULOMB_FRICTION
+from sim.errors import ConfigError
 from sim.recording import read_recording
 from tasks.episode import run_episode
 from tasks.episode_config import EpisodeConfig
@@ -89,3 +92,31 @@ def test_frictionless_episode_says_no_missing_physics(episodes) -> None:
 def test_frictionless_episode_does_not_find_joint_friction(episodes) -> None:
     _, _, diag = episodes["none"]
     assert "joint_friction" not in {f.effect for f in diag.findings}, diag.verdict
+
+
+def test_against_the_cell_config_the_friction_is_no_longer_missing(episodes, tmp_path) -> None:
+    """``serpar diagnose REC --model cell.yaml``: the cell the config builds (its arm friction)
+    is the nominal model, so what was the top finding is explained before any fit."""
+    rec, family, blind = episodes["friction"]
+    cell = tmp_path / "cell.yaml"
+    cell.write_text("holes: [14]\narm_friction: 0.3\n")
+    diag = diagnose(PriorFamily(family, model_from_episode_config(cell)), 0)
+    assert "joint_friction" not in {f.effect for f in diag.findings}, diag.verdict
+    assert diag.heldout_rms_before < 0.15 * blind.heldout_rms_before
+
+
+def test_episode_config_as_a_model(tmp_path) -> None:
+    cell = tmp_path / "cell.yaml"
+    cell.write_text("arm_friction: 0.5\n")
+    model = model_from_episode_config(cell)
+    assert model.effects == ("joint_friction",)
+    block = model.block("joint_friction")
+    assert np.allclose(block.values[:7], 0.5 * np.array(PANDA_COULOMB_FRICTION))
+    assert np.allclose(block.values[7:], 0.0)
+    cell.write_text("arm_friction: 0.0\n")
+    assert model_from_episode_config(cell).effects == ()
+    with pytest.raises(ConfigError, match="not found"):
+        model_from_episode_config(tmp_path / "missing.yaml")
+    cell.write_text("arm_frictoin: 0.3\n")
+    with pytest.raises(ConfigError, match="arm_frictoin"):
+        model_from_episode_config(cell)

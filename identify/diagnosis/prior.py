@@ -57,7 +57,6 @@ class PriorFamily:
                 f"{', '.join(by_name) or 'none'}")
         self.inner, self.model = inner, model
         self.kind = f"{inner.kind}, against {model.path}"
-        self.baseline = inner.baseline
         self.n_samples = inner.n_samples
         self.fixed: dict[str, Vec] = {}
         self.fixed_std: dict[str, Vec] = {}
@@ -67,6 +66,12 @@ class PriorFamily:
             self._correction(e) if e.name in self.fixed else e for e in inner.effects)
         if callable(getattr(inner, "jacobian", None)):
             self.jacobian = self._jacobian
+
+    @property
+    def baseline(self) -> Effect | None:
+        # the inner family's, read live: a family may settle its baseline in split()
+        # (identify/diagnosis/episode.py pins its drifting tare's knots to the training rows)
+        return self.inner.baseline
 
     def _correction(self, e: Effect) -> Effect:
         f = self.fixed[e.name]
