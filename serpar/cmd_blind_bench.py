@@ -14,7 +14,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--trials", type=int, default=12, help="number of trials (default 12)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--domain", action="append",
-                   help="restrict to a domain (repeatable): arm_static, arm_dynamics, stewart")
+                   help="restrict to a domain (repeatable): arm_static, arm_dynamics, stewart, "
+                        "stewart_motion")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_blind_bench)
     return p

@@ -15,8 +15,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                     "(truth in answer.json)")
     p.add_argument("--effect", required=True,
                    help="an effect name (serpar twin --effect list shows them) or none")
-    p.add_argument("--domain", help="arm_static, arm_dynamics or stewart (needed only with "
-                                    "none; default arm_static)")
+    p.add_argument("--domain", help="arm_static, arm_dynamics, stewart or stewart_motion "
+                                    "(needed only with none; default arm_static)")
     p.add_argument("--magnitude", type=float,
                    help="size of the effect (units per domain twin module, e.g. "
                         "tasks/twin_stewart.py: K, m/N, m or x Table 5; default: its default "

@@ -79,7 +79,7 @@ class Reality:
             raise ConfigError(f"payload_kg {self.payload_kg} must be >= 0")
 
 
-def _spec(reality: Reality, physics: PhysicsConfig) -> tuple[mujoco.MjSpec, StewartConfig]:
+def platform_spec(reality: Reality, physics: PhysicsConfig) -> tuple[mujoco.MjSpec, StewartConfig]:
     errors = None if reality.joint_errors is None else tuple(map(tuple, reality.joint_errors))
     cfg = StewartConfig(joint_errors=errors)
     spec = build_stewart_spec(cfg, physics)
@@ -106,7 +106,7 @@ class PlatformPlant:
 
     def __init__(self, reality: Reality, physics: PhysicsConfig | None = None) -> None:
         physics = physics or PhysicsConfig(sleep=False)
-        spec, self.cfg = _spec(reality, physics)
+        spec, self.cfg = platform_spec(reality, physics)
         self.reality = reality
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)

@@ -18,6 +18,7 @@ DOMAINS: dict[str, str] = {
     "arm_static": "tasks.twin_arm_static",
     "arm_dynamics": "tasks.twin_arm_dynamics",
     "stewart": "tasks.twin_stewart",
+    "stewart_motion": "tasks.twin_stewart_motion",
 }
 DEFAULT_RANGE = (0.5, 2.0)
 

@@ -14,7 +14,8 @@ STEWART_PREFIXES = ("leg", "platform_")
 whichever of its channels are missing."""
 WHAT = ("a measurements table (q1..q7 with x/y/z or socket: a static calibration set), or arm "
         "signals q1..7 and tau_J1..7 (a time series), or Stewart signals leg_cmd1..6, leg1..6, "
-        "platform_x/y/z/qw/qx/qy/qz (rest holds of the platform), or a panda_1-layout folder")
+        "platform_x/y/z/qw/qx/qy/qz (rest holds of the platform, or the platform moving "
+        "continuously), or a panda_1-layout folder")
 
 
 def is_panda_folder(path: Path) -> bool:
@@ -39,8 +40,9 @@ def load_for_diagnosis(path: str | Path) -> Recording:
 def family_from_recording(rec: Recording) -> Family:
     """The static arm family when the recording has measurements, else the episode family
     for an assembly episode (``serpar run --record``), else the arm-dynamics family when it has
-    the arm's joint signals, else the Stewart family when it has Stewart
-    leg or platform channels; else one line saying what is needed."""
+    the arm's joint signals, else a Stewart family when it has Stewart
+    leg or platform channels (the motion family when the leg commands change at most samples,
+    the rest-hold family otherwise); else one line saying what is needed."""
     if rec.measurements is not None and rec.measurements.num_rows > 0:
         from identify.diagnosis.arm_static import family_from_data
         from identify.diagnosis.arm_static_data import static_data
@@ -60,6 +62,13 @@ def family_from_recording(rec: Recording) -> Family:
 
         return dynamics_family(rec)
     if rec.signals.num_rows > 0 and any(c.startswith(STEWART_PREFIXES) for c in cols):
+        from identify.diagnosis.stewart_motion_effects import MOVING_SHARE, moving_share
+
+        if moving_share(rec) > MOVING_SHARE:
+            # --- Stewart platform in continuous motion (identify/diagnosis/stewart_motion.py)
+            from identify.diagnosis.stewart_motion import family_from_recording as motion_family
+
+            return motion_family(rec)
         # --- Stewart platform rest holds (identify/diagnosis/stewart.py)
         from identify.diagnosis.stewart import family_from_recording as stewart_family
 
