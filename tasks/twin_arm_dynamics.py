@@ -5,7 +5,7 @@ lacks, recorded like a libfranka log (q, dq, tau_J, tau_J_d at 1 kHz), for
 The reality is built from MuJoCo's own physics wherever MuJoCo can express the effect
 (``frictionloss`` + ``damping`` for joint friction, an added body for a payload, scaled body
 inertias for a link error); sensor and drive effects (torque-sensor gain and bias, encoder
-offset, actuation latency) act on the signals in tasks/twin_arm_dynamics_sim.py. The answer
+offset, actuation latency, torque-sensor timing) act on the signals in tasks/twin_arm_dynamics_sim.py. The answer
 goes into the returned dict, never into the recording.
 
 Magnitude per effect (drawn from the range in :data:`MAGNITUDE_RANGE` when not given):
@@ -17,6 +17,7 @@ Magnitude per effect (drawn from the range in :data:`MAGNITUDE_RANGE` when not g
 | link_inertia | relative mass error of one link (inertia tensor scaled with it) | which link (3, 4 or 5), the sign |
 | torque_sensor | largest gain error (0.03 = +3 %) | per-joint gains 50-100 % of it, one sign for all (a payload fit mimics it on tau_J), offsets ±0.1-0.5 N m |
 | latency | actuation delay [s] | — (0.1 ms resolution) |
+| sensor_timing | how late the torque sensors read against the encoders [s] | — (0.1 ms resolution; the simulated cell's own sensors read half a substep late, ~0.05 ms) |
 | encoder_offset | largest offset [rad] | offsets of joints 2-6 (joint 1's is invisible to dynamics: gravity is along its axis) |
 """
 
@@ -34,13 +35,14 @@ from sim.recording import PhaseSegment, Recording, RecordingMeta
 from tasks.twin_arm_dynamics_sim import Reality, SensorNoise, TwinRun, simulate
 
 EFFECTS: tuple[str, ...] = ("joint_friction", "payload", "link_inertia", "torque_sensor",
-                            "latency", "encoder_offset")
+                            "latency", "sensor_timing", "encoder_offset")
 MAGNITUDE_RANGE: dict[str, tuple[float, float]] = {
     "joint_friction": (0.2, 1.0),
     "payload": (0.2, 1.5),
     "link_inertia": (0.1, 0.3),
     "torque_sensor": (0.02, 0.06),
     "latency": (0.001, 0.004),
+    "sensor_timing": (0.0005, 0.002),
     "encoder_offset": (0.001, 0.004),
 }
 PANDA_VISCOUS: tuple[float, ...] = (0.2, 0.2, 0.2, 0.2, 0.1, 0.1, 0.1)
@@ -104,6 +106,9 @@ def _reality(effect: str, mag: float, rng: np.random.Generator) -> tuple[Reality
     if effect == "latency":
         delay = round(mag, 4)
         return Reality(delay=delay), {"delay": delay}
+    if effect == "sensor_timing":
+        lag = round(mag, 4)  # whole 0.1 ms substeps
+        return Reality(sensor_lag=lag), {"lag": lag}
     if effect == "encoder_offset":
         off = np.zeros(N_JOINTS)
         off[1:6] = rng.uniform(-1.0, 1.0, 5)

@@ -84,6 +84,9 @@ class Reality:
     """Measured minus true joint angle [rad]."""
     delay: float = 0.0
     """Actuation latency: a command reaches the joint this much later [s]."""
+    sensor_lag: float = 0.0
+    """The torque sensors' readings belong to this much earlier than the encoders' [s]
+    (a whole number of physics substeps)."""
 
     def __post_init__(self) -> None:
         for name in ("torque_gain", "torque_bias", "encoder_offset"):
@@ -93,6 +96,8 @@ class Reality:
             object.__setattr__(self, name, v)
         if not 0.0 <= self.delay <= 0.02:
             raise ConfigError(f"Reality.delay={self.delay} s outside 0..0.02 s")
+        if not 0.0 <= self.sensor_lag <= 0.005:
+            raise ConfigError(f"Reality.sensor_lag={self.sensor_lag} s outside 0..0.005 s")
 
 
 @dataclass(frozen=True)
@@ -161,8 +166,11 @@ def simulate(model: mujoco.MjModel, reality: Reality, noise: SensorNoise, durati
     weights = np.ones(sub + 1)
     weights[[0, -1]] = 0.5  # trapezoid over the period's substep starts, both ends included
     weights /= sub
-    period = np.zeros((sub, N_JOINTS))  # sensor values at the substep starts of a period
-    last = period.copy()  # the previous period's
+    lag = round(reality.sensor_lag / physics.timestep)
+    if abs(lag * physics.timestep - reality.sensor_lag) > 1e-12:
+        raise ConfigError(f"Reality.sensor_lag {reality.sensor_lag} s is not a whole number of "
+                          f"{physics.timestep} s physics steps")
+    history = np.zeros((n * sub + 1, N_JOINTS))  # the sensors at every substep's start
     mujoco.mj_forward(model, data)
     for k in range(n):
         q_m = quantise(data.qpos[idx.qpos] + reality.encoder_offset, noise.encoder_counts_per_rev)
@@ -178,14 +186,14 @@ def simulate(model: mujoco.MjModel, reality: Reality, noise: SensorNoise, durati
             old = applied[max((g - 1) // sub, 0)]
             ctrl[:] = new if g % sub else 0.5 * (old + new)  # a jump: centred on t_n
             mujoco.mj_step(model, data)  # sensors at the substep's start state and torque
-            period[s] = torque
+            history[k * sub + s] = torque
             if s == 0:
                 # the substep at t_k closes the previous period: now its mean is known
-                period_end = period[0].copy()
-                reading = period_end if k == 0 else weights @ np.vstack([last, period_end])
+                end = k * sub - lag  # a lagging sensor's period ended `lag` substeps ago
+                reading = (history[max(end, 0)] if end < sub
+                           else weights @ history[end - sub:end + 1])
                 out_tau[k] = ((1.0 + reality.torque_gain) * reading + bias
                               + rng.normal(0.0, noise.torque_std, N_JOINTS))
-        last = period.copy()
         if not np.all(np.isfinite(data.qpos)):
             raise ConfigError(f"the twin's simulation diverged at t = {k * h:.3f} s")
     return TwinRun(np.arange(n) * h, out_q, out_dq, out_tau, out_cmd, saturated, bias)

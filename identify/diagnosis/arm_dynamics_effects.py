@@ -9,6 +9,8 @@ evaluated with ``mj_rne`` and no hand-written dynamics:
   arm with all but one link massless, and from 10 reference payload bodies);
 * friction and sensor gain are linear regressors on the data and the nominal torque;
 * latency shifts the windowed command (a cubic spline) by the delay;
+* sensor timing shifts the link channel's model by the torque sensors' lag behind the
+  encoders, to first order (minus lag x the windowed rate of the nominal link torque);
 * encoder offsets are evaluated exactly per call, ``mj_rne`` at the offset angles of the rows
   asked for (a few hundred), so no linearisation error enters a fit.
 
@@ -72,6 +74,8 @@ EFFECTS: tuple[Effect, ...] = (
            tuple(f"gain{j}" for j in J), ("1",) * 7, np.zeros(7), np.full(7, -0.5), np.full(7, 0.5)),
     Effect("latency", "actuation latency (command reaches the joint late)", ("delay",), ("s",),
            np.zeros(1), np.array([-0.005]), np.array([0.03])),
+    Effect("sensor_timing", "torque sensors sampled out of step with the encoders (lag)",
+           ("lag",), ("s",), np.zeros(1), np.array([-0.005]), np.array([0.005])),
     Effect("encoder_offset", "joint encoder offsets (measured minus true angle)",
            tuple(f"offset{j}" for j in OFFSET_JOINTS), ("rad",) * len(OFFSET_JOINTS),
            np.zeros(len(OFFSET_JOINTS)), np.full(len(OFFSET_JOINTS), -0.2),
@@ -97,6 +101,9 @@ class EffectModels:
         self.base_link = dynamics.link_torque(terms.q_link, terms.dq_link, terms.ddq_link)
         self.base_drive = dynamics.link_torque(terms.q, terms.dq, terms.ddq)
         self.payload_link, self.payload_drive = self._payload_regressor()
+        # sensor timing: a link torque read `lag` late is the model's, minus lag x its rate
+        full = dynamics.link_torque(terms.q_full, terms.dq_full, terms.a_full)
+        self.link_rate = terms.rows.link_at(np.gradient(full, axis=0) * terms.rate)
         self._offset_cols = np.array(OFFSET_JOINTS) - 1
 
     def _per_link(self) -> tuple[Vec, Vec]:
@@ -128,6 +135,8 @@ class EffectModels:
         link = np.zeros((len(rows), 7))
         drive = np.zeros((len(rows), 7))
         band = np.zeros((len(rows), 7))
+        if "sensor_timing" in params:
+            link -= self.link_rate[rows] * params["sensor_timing"][0]
         if "joint_friction" in params:
             p = params["joint_friction"]
             drive += self.coulomb[rows] * p[:7] + self.viscous[rows] * p[7:]
