@@ -14,6 +14,7 @@ from assets import asset_path
 from sim.arm import PANDA_COULOMB_FRICTION
 from sim.arm_plant import ArmPlantChanges
 from sim.errors import ConfigError
+from sim.physics import PhysicsConfig
 from sim.scene import SceneConfig
 from sim.stewart import StewartConfig
 from sim.tolerances import DISTRIBUTIONS
@@ -101,6 +102,10 @@ class EpisodeConfig:
     simulated arm gets the physics that diagnosis found (identify/diagnosis/plant_model.py; its
     joint friction, if any, replaces arm_friction). None = the nominal arm."""
 
+    contact_friction: float | None = None
+    """Journal/bore sliding friction of the cell (None: ``PhysicsConfig.precision_friction``);
+    a concealed effect for the diagnosis of insertions (identify/diagnosis/insertion.py)."""
+
     def __post_init__(self) -> None:
         if not isinstance(self.seed, int) or isinstance(self.seed, bool):
             raise ConfigError(f"seed must be an integer, got {self.seed!r}")
@@ -126,6 +131,8 @@ class EpisodeConfig:
             raise ConfigError("stewart_calibration is a file but stewart_correction is off: it would be unused")
         if self.plant_model is not None:
             _arm_plant(self.plant_model)  # a missing or bad file fails here, not in an episode
+        if self.contact_friction is not None and not 0.01 <= self.contact_friction <= 1.5:
+            raise ConfigError(f"contact_friction {self.contact_friction}: valid 0.01..1.5 or null")
 
     @property
     def calibration_file(self) -> str | None:
@@ -150,9 +157,11 @@ def scene_config(cfg: EpisodeConfig) -> SceneConfig:
     plant = _arm_plant(cfg.plant_model)
     if plant is not None and plant.frictionloss:
         friction = ()  # a diagnosis fits the total dry friction against a frictionless arm
+    physics = (PhysicsConfig() if cfg.contact_friction is None
+               else PhysicsConfig(precision_friction=cfg.contact_friction))
     return SceneConfig(seed=cfg.seed, tolerance_distribution=cfg.tolerance_distribution,
                        stewart=StewartConfig(joint_errors=cfg.hidden_errors.draw(cfg.seed)),
-                       arm_joint_friction=friction, arm_plant=plant)
+                       arm_joint_friction=friction, arm_plant=plant, physics=physics)
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:

@@ -11,8 +11,14 @@ for them. This family therefore compares only the windows that lie wholly inside
 free-motion phase (:data:`FREE_PHASES`); every other sample is excluded *and reported*, per
 phase, in the family's kind (the "where" table still shows every phase it kept).
 
+The insert phases add one row per chamfer slide (identify/diagnosis/insertion.py): where an
+off-centre journal slides down the 45 deg chamfer, the lateral/axial ratio of the wrench
+estimate is (1 - mu)/(1 + mu), so journal/bore friction (``contact_friction``) is a candidate
+when an episode has at least :data:`MIN_SLIDES` of them.
+
 Training and held-out rows: alternate 2-s blocks of the free-motion windows (the arm-dynamics
-family's split), so held-out rows are motions of other moments of the episode.
+family's split), so held-out rows are motions of other moments of the episode; alternate
+insertions for the chamfer rows.
 """
 
 from __future__ import annotations
@@ -25,6 +31,9 @@ from numpy.typing import NDArray
 from identify.diagnosis.arm_dynamics import ArmDynamicsConfig, ArmDynamicsFamily
 from identify.diagnosis.arm_dynamics import family_from_recording as dynamics_family
 from identify.diagnosis.family import Effect, LocateRow
+from identify.diagnosis.insertion import EFFECT as FRICTION
+from identify.diagnosis.insertion import ChamferSlides, chamfer_slides
+from identify.diagnosis.locate import locate_rows
 from identify.errors import IdentificationError
 from sim.recording import Recording
 
@@ -43,6 +52,9 @@ TARE_KNOT_S = 2.0
 sensor zeros walk (the cell's sensor model: 0.002 N m/sqrt(s), i.e. ~0.006 N m in 10 s, about
 twice a wrist joint's 1 ms-window noise); between knots 2 s apart the walk's bridge leaves
 ~0.001 N m. One knot per split block, so every knot is pinned by a training block."""
+MIN_SLIDES = 2
+"""Chamfer slides an episode needs for the contact-friction candidate: one to fit, one to
+hold out."""
 MIN_ROWS = 40
 """Fewest free-motion windows an episode must give (about 2 s at the default window)."""
 
@@ -54,30 +66,43 @@ def is_episode(rec: Recording) -> bool:
 
 
 class EpisodeFamily:
-    """The free-motion windows of an episode, diagnosed as arm dynamics."""
+    """The free-motion windows of an episode, diagnosed as arm dynamics, and its insertions'
+    chamfer slides (identify/diagnosis/insertion.py), one row each after the windows."""
 
     def __init__(self, inner: ArmDynamicsFamily, keep: NDArray[np.int64],
-                 excluded: Mapping[str, int]) -> None:
+                 excluded: Mapping[str, int], slides: ChamferSlides | None = None) -> None:
         if len(keep) < MIN_ROWS:
             raise IdentificationError(
                 f"the episode has {len(keep)} comparison windows in free motion "
                 f"({', '.join(FREE_PHASES)}); at least {MIN_ROWS} are needed")
         self.inner, self.keep = inner, np.asarray(keep, np.int64)
         self.excluded = dict(excluded)
+        self.slides = slides if slides is not None and slides.n >= MIN_SLIDES else None
         self.baseline: Effect | None = inner.baseline
-        self.effects: tuple[Effect, ...] = inner.effects
-        self.n_samples = len(self.keep)
+        self.effects: tuple[Effect, ...] = inner.effects + ((FRICTION,) if self.slides else ())
+        self.n_arm = len(self.keep)
+        self.n_samples = self.n_arm + (self.slides.n if self.slides else 0)
         dropped = ", ".join(f"{n} in {p}" for p, n in self.excluded.items() if n)
-        self.kind = (f"{KIND} (arm dynamics over {len(self.keep)} free-motion windows; "
-                     f"contact windows excluded: {dropped or 'none'})")
-        if callable(getattr(inner, "jacobian", None)):
-            self.jacobian = self._jacobian
+        found = slides.n if slides is not None else 0
+        skipped = "; ".join(f"{n} {why}" for why, n in (slides.not_used if slides else {}).items())
+        self.kind = (f"{KIND} (arm dynamics over {self.n_arm} free-motion windows; contact "
+                     f"windows excluded: {dropped or 'none'}; {found} chamfer slide(s)"
+                     + (f", insertions not used: {skipped}" if skipped else "")
+                     + ("" if self.slides else f", fewer than {MIN_SLIDES}: contact friction "
+                        "not a candidate") + ")")
+
+    def _parts(self, rows: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        rows = np.asarray(rows, np.int64)
+        return rows[rows < self.n_arm], rows[rows >= self.n_arm] - self.n_arm
 
     def residual(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
-        return self.inner.residual(params, self.keep[np.asarray(rows, np.int64)])
-
-    def _jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
-        return self.inner.jacobian(params, self.keep[np.asarray(rows, np.int64)])  # type: ignore[attr-defined]
+        """The arm rows' residuals (14 each) first, then one per chamfer slide."""
+        arm, slide = self._parts(rows)
+        out = self.inner.residual({k: v for k, v in params.items() if k != FRICTION.name},
+                                  self.keep[arm])
+        if self.slides is None or slide.size == 0:
+            return out
+        return np.concatenate([out, self.slides.residual(params.get(FRICTION.name), slide)])
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         t = self.inner.terms.time[self.keep]
@@ -90,10 +115,20 @@ class EpisodeFamily:
                                       f"{self.inner.cfg.block_s} s blocks to train and hold out")
         self.inner.pin_tare_knots(self.keep[train])
         self.baseline = self.inner.baseline
+        if self.slides is not None:  # alternate insertions: other holes than the fit saw
+            k = np.arange(self.slides.n)
+            train = np.r_[train, self.n_arm + k[k % 2 == first]]
+            held = np.r_[held, self.n_arm + k[k % 2 != first]]
         return train, held
 
     def locate(self, rows: NDArray[np.int64], whitened: Vec) -> list[LocateRow]:
-        return self.inner.locate(self.keep[np.asarray(rows, np.int64)], whitened)
+        arm, slide = self._parts(rows)
+        w = np.asarray(whitened, float)
+        out = self.inner.locate(self.keep[arm], w[:14 * arm.size])
+        if slide.size:
+            out += locate_rows([("insertion force ratio", "phase", "chamfer slide",
+                                 w[14 * arm.size:])])
+        return out
 
 
 def free_windows(rec: Recording, inner: ArmDynamicsFamily) -> tuple[NDArray[np.int64], dict[str, int]]:
@@ -120,4 +155,4 @@ def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None) 
     """The episode family of ``rec`` (IdentificationError names what the recording lacks)."""
     inner = dynamics_family(rec, cfg or ArmDynamicsConfig(tare_knot_s=TARE_KNOT_S))
     keep, excluded = free_windows(rec, inner)
-    return EpisodeFamily(inner, keep, excluded)
+    return EpisodeFamily(inner, keep, excluded, chamfer_slides(rec))

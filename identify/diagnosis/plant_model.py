@@ -42,6 +42,10 @@ NOT_APPLICABLE: dict[str, str] = {
                      "for an episode",
     "torque_sensor": "a torque sensor's gain is its calibration, not physics: MuJoCo's torque "
                      "sensors have no gain",
+    "sensor_timing": "when the torque sensors are sampled is the sensor model's timing, not the "
+                     "arm's physics",
+    "contact_friction": "the journal/bore friction belongs to the cell's contacts, not the arm: "
+                        "set the episode config's contact_friction to 0.2 + d_mu",
 }
 PAYLOAD = ("mass", "com_x", "com_y", "com_z", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
 POINT_MASS_INERTIA = 1e-9
