@@ -41,6 +41,9 @@ TIME_BINS = 3
 SCALE_RANGE = (0.5, 2.0)
 """Accepted regression slope of a joint's measured on its nominal torque: a payload or a gain
 error moves it by tens of per cent; N mm for N m, or another robot, by far more."""
+PIN_SHARE = 0.5
+"""A drifting tare's knot is kept only with a training row within this share of the spacing:
+a knot that only distant rows pin is fixed by leverage, and noise swings it."""
 SCALE_MIN_RMS = 1.0
 """[N m] Joints whose nominal torque varies less than this are not tested for scale."""
 
@@ -182,7 +185,7 @@ def drifting_tare(time: Vec, pinned_by: Vec, spacing_s: float) -> tuple[Vec, Eff
     within one spacing) and the baseline Effect of a piecewise-linear tare per sensor
     (constant beyond the end knots)."""
     grid = time[0] + spacing_s * np.arange(int(np.ceil((time[-1] - time[0]) / spacing_s)) + 1)
-    near = np.abs(grid[:, None] - pinned_by[None, :]).min(axis=1) < spacing_s
+    near = np.abs(grid[:, None] - pinned_by[None, :]).min(axis=1) < PIN_SHARE * spacing_s
     knots = grid[near]
     names = tuple(f"tare{j}@{t - time[0]:.0f}s" for t in knots for j in range(1, 8))
     k = len(names)

@@ -52,6 +52,9 @@ TARE_KNOT_S = 2.0
 sensor zeros walk (the cell's sensor model: 0.002 N m/sqrt(s), i.e. ~0.006 N m in 10 s, about
 twice a wrist joint's 1 ms-window noise); between knots 2 s apart the walk's bridge leaves
 ~0.001 N m. One knot per split block, so every knot is pinned by a training block."""
+MAX_EFFECTS = 5
+"""More than the engine's default 3: an episode holds the arm's dynamics (friction, the held
+part's mass, the cell's sensor timing) and its insertions' contact friction at once."""
 MIN_SLIDES = 2
 """Chamfer slides an episode needs for the contact-friction candidate: one to fit, one to
 hold out."""
@@ -80,6 +83,7 @@ class EpisodeFamily:
         self.slides = slides if slides is not None and slides.n >= MIN_SLIDES else None
         self.baseline: Effect | None = inner.baseline
         self.effects: tuple[Effect, ...] = inner.effects + ((FRICTION,) if self.slides else ())
+        self.max_effects = MAX_EFFECTS
         self.n_arm = len(self.keep)
         self.n_samples = self.n_arm + (self.slides.n if self.slides else 0)
         dropped = ", ".join(f"{n} in {p}" for p, n in self.excluded.items() if n)

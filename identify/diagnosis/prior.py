@@ -68,6 +68,12 @@ class PriorFamily:
             self.jacobian = self._jacobian
 
     @property
+    def max_effects(self) -> int:
+        from identify.diagnosis.select import SelectConfig
+
+        return int(getattr(self.inner, "max_effects", SelectConfig.max_effects))
+
+    @property
     def baseline(self) -> Effect | None:
         # the inner family's, read live: a family may settle its baseline in split()
         # (identify/diagnosis/episode.py pins its drifting tare's knots to the training rows)

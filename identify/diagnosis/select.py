@@ -124,8 +124,12 @@ def diagnose(family: Family, seed: int = 0, cfg: SelectConfig | None = None,
     """Run every stage on one family; the result holds the findings and the evidence."""
     # The fits are small (hundreds of rows, tens of columns): OpenBLAS threads on a shared
     # 2-core machine only wait for each other (a 28-parameter fit: 3.5 s against 0.17 s).
+    if cfg is None:
+        # a family whose recordings hold several independent parts (an episode: the arm's
+        # dynamics and its insertions) may allow more effects; each must still earn its place
+        cfg = SelectConfig(max_effects=getattr(family, "max_effects", SelectConfig.max_effects))
     with threadpool_limits(limits=1, user_api="blas"):
-        return _diagnose(family, seed, cfg or SelectConfig(), report)
+        return _diagnose(family, seed, cfg, report)
 
 
 def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | None
