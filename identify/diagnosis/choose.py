@@ -13,7 +13,8 @@ STEWART_PREFIXES = ("leg", "platform_")
 """A recording with any channel starting so is meant for the Stewart family, which then names
 whichever of its channels are missing."""
 WHAT = ("a measurements table (q1..q7 with x/y/z or socket: a static calibration set), or arm "
-        "signals q1..7 and tau_J1..7 (a time series), or Stewart signals leg_cmd1..6, leg1..6, "
+        "signals q1..7 and tau_J1..7 (a time series, or an assembly episode of serpar run "
+        "--record), or Stewart signals leg_cmd1..6, leg1..6, "
         "platform_x/y/z/qw/qx/qy/qz (rest holds of the platform, or the platform moving "
         "continuously), or a panda_1-layout folder")
 
