@@ -125,14 +125,19 @@ def _platform(rec: Recording) -> tuple[StewartConfig, Load]:
     return cfg, nominal_load(mass, com)  # type: ignore[arg-type]
 
 
-def read_stewart(rec: Recording) -> StewartHolds:
-    """The holds of a Stewart recording; IdentificationError (one line) names what is wrong."""
+def require_channels(rec: Recording, what: str) -> None:
+    """IdentificationError (one line) naming the Stewart channels ``rec`` lacks."""
     cols = set(rec.signals.column_names)
     missing = [c for c in CHANNELS if c not in cols]
     if missing:
-        raise IdentificationError(f"a Stewart recording needs channels {', '.join(missing)} "
+        raise IdentificationError(f"{what} needs channels {', '.join(missing)} "
                                   f"(valid set: {CHANNELS_HELP}); it has "
                                   f"{', '.join(sorted(cols - {'time'})) or 'no channels'}")
+
+
+def read_stewart(rec: Recording) -> StewartHolds:
+    """The holds of a Stewart recording; IdentificationError (one line) names what is wrong."""
+    require_channels(rec, "a Stewart recording")
     cfg, load = _platform(rec)
     t = _column(rec, "time")
     cmd = np.column_stack([_column(rec, c) for c in CMDS])

@@ -27,8 +27,6 @@ from numpy.typing import NDArray
 
 from identify.diagnosis.family import Effect
 from identify.diagnosis.stewart_data import (
-    CHANNELS,
-    CHANNELS_HELP,
     CMDS,
     CONFIG_KEYS,
     LEGS,
@@ -37,6 +35,7 @@ from identify.diagnosis.stewart_data import (
     _platform,
     _sigma,
     _stewart_meta,
+    require_channels,
 )
 from identify.diagnosis.stewart_model import Load
 from identify.errors import IdentificationError
@@ -90,12 +89,7 @@ def read_motion(rec: Recording) -> MotionSamples:
     """The samples of a moving-platform recording; IdentificationError names what is wrong."""
     from controllers.rotations import quat_to_rot
 
-    cols = set(rec.signals.column_names)
-    missing = [c for c in CHANNELS if c not in cols]
-    if missing:
-        raise IdentificationError(f"a Stewart motion recording needs channels "
-                                  f"{', '.join(missing)} (valid set: {CHANNELS_HELP}); it has "
-                                  f"{', '.join(sorted(cols - {'time'})) or 'no channels'}")
+    require_channels(rec, "a Stewart motion recording")
     cfg, load = _platform(rec)
     t = _column(rec, "time")
     if len(t) < MIN_SAMPLES or np.any(np.diff(t) <= 0):
