@@ -154,3 +154,15 @@ def test_higher_contact_friction_is_found_in_the_chamfer_slides(episodes) -> Non
     mu = NOMINAL_MU + d_mu.value
     assert abs(mu - CONTACT_MU) <= 3 * d_mu.std, (mu, d_mu.std)
     assert mu > NOMINAL_MU + 0.1
+
+
+def test_an_episode_without_the_wrench_estimate_still_diagnoses_the_arm(episodes) -> None:
+    """A recording without O_F_ext_hat_K / O_T_EE_z: no chamfer rows, and the report says why."""
+    rec, _, _ = episodes["friction"]
+    drop = [c for c in rec.signals.column_names if c.startswith(("O_F_ext_hat_K", "O_T_EE"))]
+    meta = dataclasses.replace(rec.meta, channels=tuple(c for c in rec.meta.channels
+                                                        if c not in drop))
+    bare = dataclasses.replace(rec, meta=meta, signals=rec.signals.drop_columns(drop))
+    family = family_from_recording(bare)
+    assert family.slides is None and "no O_T_EE_z" in family.kind
+    assert "contact_friction" not in {e.name for e in family.effects}

@@ -28,7 +28,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from identify.diagnosis.family import Effect
-from identify.errors import IdentificationError
 from sim.physics import PhysicsConfig
 from sim.recording import Recording
 
@@ -93,11 +92,13 @@ def _correlation_time(x: Vec, dt: float) -> float:
 
 
 def chamfer_slides(rec: Recording) -> ChamferSlides:
-    """The chamfer slides of an episode recording's insert phases."""
+    """The chamfer slides of an episode recording's insert phases (none, with the reason, when
+    the recording lacks the wrench estimate or the TCP height)."""
     cols = set(rec.signals.column_names)
     missing = [c for c in CHANNELS if c not in cols]
-    if missing:
-        raise IdentificationError(f"insertion friction needs {', '.join(missing)}")
+    if missing:  # the arm's dynamics can still be diagnosed: say why the insertions are not
+        n_insert = sum(p.name == "insert" for p in rec.meta.phases)
+        return _slides([], {f"no {', '.join(missing)} channel(s)": n_insert})
     t = np.asarray(rec.signals.column("time"), float)
     z = np.asarray(rec.signals.column("O_T_EE_z"), float)
     f = np.stack([np.asarray(rec.signals.column(c), float) for c in CHANNELS[1:]], axis=1)
@@ -131,6 +132,11 @@ def chamfer_slides(rec: Recording) -> ChamferSlides:
             return float(x.std() * np.sqrt(min(1.0, 2 * _correlation_time(x, dt) / (seg.size * dt))))
         rows.append((t[seg[0]], lateral.mean(), axial.mean(),
                      sigma_mean(f[pre, :2] @ direction), sigma_mean(f[pre, 2]), seg.size))
+    return _slides(rows, not_used)
+
+
+def _slides(rows: list[tuple[float, float, float, float, float, int]],
+            not_used: dict[str, int]) -> ChamferSlides:
     a = np.array(rows, float).reshape(-1, 6)
     return ChamferSlides(a[:, 0], a[:, 1], a[:, 2], a[:, 3], a[:, 4], a[:, 5].astype(np.int64),
                          not_used)
