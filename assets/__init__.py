@@ -4,6 +4,9 @@ Each folder has a README saying where its numbers come from. Python code that
 turns these numbers into MuJoCo specs lives in :mod:`sim`.
 """
 
+if not __name__.startswith("serpar."):  # a repository folder is a serpar subpackage, not a top-level name
+    raise ModuleNotFoundError(f"No module named {__name__!r}; import serpar.{__name__}", name=__name__)
+
 from pathlib import Path
 
 ASSETS_DIR = Path(__file__).resolve().parent

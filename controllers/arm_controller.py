@@ -13,8 +13,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
-
-from controllers.arm_laws import (
+from serpar.controllers.arm_laws import (
     CartesianTarget,
     ForcePositionGains,
     ForceTarget,
@@ -25,11 +24,12 @@ from controllers.arm_laws import (
     joint_pd_torque,
     next_force_offset,
 )
-from controllers.arm_model import ArmIndex, NominalArm, require_joint_target, saturate_torque
-from controllers.arm_sensors import ArmMeasurement, ArmSensorConfig, ArmSensors
-from controllers.wrench import WrenchEstimator, WrenchEstimatorConfig
-from sim.arm import TORQUE_LIMITS
-from sim.errors import ConfigError
+from serpar.controllers.arm_model import NominalArm, require_joint_target
+from serpar.controllers.arm_sensors import ArmMeasurement, ArmSensorConfig, ArmSensors
+from serpar.controllers.wrench import WrenchEstimator, WrenchEstimatorConfig
+from serpar.errors import ConfigError
+from serpar.sim.arm import TORQUE_LIMITS
+from serpar.sim.arm_drive import ArmIndex, saturate_torque
 
 Vec = NDArray[np.float64]
 
@@ -173,3 +173,8 @@ class ArmController:
         """One control period: update, then the physics substeps."""
         self.update(model, data)
         mujoco.mj_step(model, data, nstep=self.substeps)
+
+
+def controller_config(noise: bool) -> ArmControllerConfig:
+    """The cell's arm controller: with the Panda's sensor noise, or with ideal sensors."""
+    return ArmControllerConfig(sensors=ArmSensorConfig() if noise else ArmSensorConfig.ideal())

@@ -13,10 +13,9 @@ from functools import cached_property
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
-
-from controllers.arm_model import NominalArm
-from sim.arm import HOME_Q, N_JOINTS
-from sim.errors import ConfigError
+from serpar.controllers.arm_model import NominalArm
+from serpar.errors import ConfigError
+from serpar.sim.arm import HOME_Q, N_JOINTS
 
 Vec = NDArray[np.float64]
 

@@ -9,57 +9,19 @@ noise off the model is exact; calibration and ``diagnose`` perturb it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
-
-from sim.arm import (
-    ACTUATOR_NAMES,
-    JOINT_NAMES,
+from serpar.errors import ConfigError, LimitError
+from serpar.sim.arm import (
     N_JOINTS,
     Q_MAX,
     Q_MIN,
-    TCP_SITE,
-    TORQUE_AXIS,
-    TORQUE_LIMITS,
-    TORQUE_SENSOR_NAMES,
     build_arm_spec,
 )
-from sim.errors import ConfigError, LimitError
+from serpar.sim.arm_drive import ArmIndex
 
 Vec = NDArray[np.float64]
-
-
-@dataclass(frozen=True, eq=False)
-class ArmIndex:
-    """Addresses of one arm in a compiled model; looked up once, used inside step loops."""
-
-    qpos: NDArray[np.int64]
-    dof: NDArray[np.int64]
-    actuators: NDArray[np.int64]
-    tcp_site: int
-    torque_adr: NDArray[np.int64]
-    """sensordata address of each joint torque (the joint-axis component of tau_J{i})."""
-
-    @classmethod
-    def from_model(cls, model: mujoco.MjModel, prefix: str = "") -> ArmIndex:
-        def lookup(kind: mujoco.mjtObj, name: str) -> int:
-            k = mujoco.mj_name2id(model, kind, prefix + name)
-            if k < 0:
-                raise ConfigError(f"{prefix + name!r} not in the model; check the arm prefix {prefix!r}")
-            return k
-
-        joints = [lookup(mujoco.mjtObj.mjOBJ_JOINT, n) for n in JOINT_NAMES]
-        sensors = [lookup(mujoco.mjtObj.mjOBJ_SENSOR, n) for n in TORQUE_SENSOR_NAMES]
-        return cls(
-            qpos=np.array([model.jnt_qposadr[j] for j in joints]),
-            dof=np.array([model.jnt_dofadr[j] for j in joints]),
-            actuators=np.array([lookup(mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in ACTUATOR_NAMES]),
-            tcp_site=lookup(mujoco.mjtObj.mjOBJ_SITE, TCP_SITE),
-            torque_adr=np.array([model.sensor_adr[s] + TORQUE_AXIS for s in sensors]),
-        )
 
 
 class NominalArm:
@@ -138,11 +100,3 @@ def require_joint_target(q: Vec) -> Vec:
         if not lo <= v <= hi:
             raise LimitError(f"joint{i + 1} target {v:.4f} rad outside its limit [{lo}, {hi}] rad")
     return q
-
-
-_TORQUE_LIMITS = np.asarray(TORQUE_LIMITS)
-
-
-def saturate_torque(tau: Vec) -> tuple[Vec, NDArray[np.bool_]]:
-    """Clip to the Panda torque limits; returns (clipped torque, which joints saturated)."""
-    return np.clip(tau, -_TORQUE_LIMITS, _TORQUE_LIMITS), np.abs(tau) > _TORQUE_LIMITS

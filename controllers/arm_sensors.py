@@ -15,9 +15,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
-
-from controllers.arm_model import ArmIndex
-from sim.errors import ConfigError
+from serpar.errors import ConfigError
+from serpar.sim.arm_drive import ArmIndex, quantise
 
 Vec = NDArray[np.float64]
 
@@ -58,14 +57,6 @@ class ArmMeasurement:
     q: Vec
     dq: Vec
     tau_J: Vec
-
-
-def quantise(q: Vec, counts_per_rev: int) -> Vec:
-    """Encoder reading of q: the nearest count (no quantisation when counts_per_rev is 0)."""
-    if counts_per_rev == 0:
-        return q.copy()
-    step = 2 * np.pi / counts_per_rev
-    return np.round(q / step) * step
 
 
 class ArmSensors:

@@ -1,7 +1,7 @@
 """Pose commands for the Stewart platform's six leg servos.
 
 The leg actuators ``leg1..6`` are MuJoCo PID position servos on the slide joints (see
-``sim.stewart.build_stewart_spec``): ``data.ctrl`` is the commanded stroke [m]. A pose is the
+``serpar.sim.stewart.build_stewart_spec``): ``data.ctrl`` is the commanded stroke [m]. A pose is the
 platform frame (site ``platform_centre``, the centre of the spherical-joint plane) in the
 Stewart base frame (body ``base``: universal-joint centres at z = 0). In the cell the base
 sits at ``SceneConfig.stewart_base`` in the world; in the standalone model at the origin.
@@ -13,17 +13,16 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-
-from controllers.rotations import quat_to_rot
-from controllers.stewart_kinematics import (
+from serpar.errors import ConfigError, LimitError
+from serpar.kinematics.rotations import quat_to_rot
+from serpar.kinematics.stewart_kinematics import (
     HINGE_DEFINITIONS,
     N_LEGS,
     HingeDefinition,
     StewartGeometry,
     require_pose,
 )
-from sim.errors import ConfigError, LimitError
-from sim.physics import wake_tree_of
+from serpar.sim.physics import wake_tree_of
 
 GEOMETRY_MATCH_TOL = 1e-9
 """Model joint sites must equal the geometry's to this [m]: commands assume the same robot."""

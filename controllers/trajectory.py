@@ -8,10 +8,9 @@ from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
-
-from controllers.arm_laws import CartesianTarget, orientation_error
-from controllers.rotations import so3_exp
-from sim.errors import ConfigError
+from serpar.controllers.arm_laws import CartesianTarget, orientation_error
+from serpar.errors import ConfigError
+from serpar.kinematics.rotations import so3_exp
 
 Vec = NDArray[np.float64]
 

@@ -13,9 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-
-from controllers.arm_model import NominalArm
-from sim.errors import ConfigError
+from serpar.controllers.arm_model import NominalArm
+from serpar.errors import ConfigError
 
 Vec = NDArray[np.float64]
 _EYE6 = np.eye(6)

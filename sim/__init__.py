@@ -1,11 +1,6 @@
-"""serpar simulation core: scene assembly, physics settings, rendering and validation.
+"""The cell and its variants in MuJoCo: scene assembly from assets/, physics settings, contact,
+sensors, rendering, the recording schema and its I/O, validation; plants/ holds the simulated
+"real" machines (friction, backlash, payload, delays) that episodes, twins and diagnosis share."""
 
-Offscreen rendering must work without a display, so EGL is the default GL
-backend unless the user chose one; this runs before mujoco is imported.
-"""
-
-import os
-
-os.environ.setdefault("MUJOCO_GL", "egl")
-if os.environ["MUJOCO_GL"] == "egl":
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+if not __name__.startswith("serpar."):  # a repository folder is a serpar subpackage, not a top-level name
+    raise ModuleNotFoundError(f"No module named {__name__!r}; import serpar.{__name__}", name=__name__)

@@ -12,12 +12,11 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-
-from sim import collision
-from sim.errors import ConfigError
-from sim.holes import BoreGeometry, add_bore, add_grid_plate, grid_centres
-from sim.physics import PhysicsConfig
-from sim.tolerances import HOLE_H7
+from serpar.errors import ConfigError
+from serpar.sim import collision
+from serpar.sim.holes import BoreGeometry, add_bore, add_grid_plate, grid_centres
+from serpar.sim.physics import PhysicsConfig
+from serpar.sim.tolerances import HOLE_H7
 
 PLATE_RGBA = (0.62, 0.63, 0.64, 1.0)  # bead-blasted aluminium; below saturation under the cell lights (~200/255)
 FIXTURE_RGBA = (0.06, 0.06, 0.07, 1.0)  # black anodised: empty holes look dark from above

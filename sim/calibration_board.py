@@ -16,9 +16,8 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-
-from sim import names
-from sim.errors import ConfigError
+from serpar.errors import ConfigError
+from serpar.sim import names
 
 BLACK = (0.04, 0.04, 0.04, 1.0)
 WHITE = (0.82, 0.82, 0.82, 1.0)

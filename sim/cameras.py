@@ -12,8 +12,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-
-from sim.errors import ConfigError
+from serpar.errors import ConfigError
 
 SENSOR_PIXELS = (2048, 1536)
 PIXEL_PITCH = 3.45e-6

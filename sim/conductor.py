@@ -13,11 +13,10 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-
-from sim import collision
-from sim.errors import ConfigError
-from sim.physics import PhysicsConfig
-from sim.tolerances import BODY_H6, JOURNAL_H6
+from serpar.errors import ConfigError
+from serpar.sim import collision
+from serpar.sim.physics import PhysicsConfig
+from serpar.sim.tolerances import BODY_H6, JOURNAL_H6
 
 CONDUCTOR_RGBA = (0.80, 0.62, 0.25, 1.0)  # brass
 JOURNAL_RGBA = (0.85, 0.70, 0.35, 1.0)

@@ -8,8 +8,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
-
-from sim.errors import ConfigError
+from serpar.errors import ConfigError
 
 T = TypeVar("T")
 

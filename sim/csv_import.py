@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
-
-from sim.recording import Recording, RecordingError, RecordingMeta, check_channels
+from serpar.sim.channels import MEASUREMENT_HELP, MEASUREMENT_OPTIONAL, MEASUREMENT_REQUIRED
+from serpar.sim.recording import Recording, RecordingError, RecordingMeta, check_channels
 
 TABLES = ("signals", "measurements")
 MAX_BAD_FRACTION = 0.01
@@ -95,12 +95,10 @@ def import_csv(path: str | Path, mapping: dict[str, str], table: str = "signals"
     if table == "signals":
         check_channels(tuple(mapping))
     else:
-        from identify.diagnosis.arm_static_data import COLUMNS_HELP, OPTIONAL, Q_COLS
-
-        unknown = [c for c in mapping if c not in (*Q_COLS, "kind", *OPTIONAL)]
+        unknown = [c for c in mapping if c not in (*MEASUREMENT_REQUIRED, *MEASUREMENT_OPTIONAL)]
         if unknown:
             raise RecordingError(f"unknown measurement column(s) {', '.join(unknown)}; valid: "
-                                 f"{COLUMNS_HELP}")
+                                 f"{MEASUREMENT_HELP}")
     cols: dict[str, list] = {}
     bad: dict[int, str] = {}
     for chan, col in mapping.items():

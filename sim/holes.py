@@ -22,8 +22,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-
-from sim.errors import ConfigError
+from serpar.errors import ConfigError
 
 GeomHook = Callable[[mujoco.MjsGeom], None]
 

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
-
-from sim.scene import Scene
+from serpar.sim.scene import Scene
 
 
 def _names(model: mujoco.MjModel, obj: mujoco.mjtObj, count: int) -> list[str]:

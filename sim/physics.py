@@ -12,8 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import mujoco
-
-from sim.errors import ConfigError
+from serpar.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -42,7 +41,7 @@ class PhysicsConfig:
     sleep: bool = True
     """MuJoCo island sleeping: parts at rest (conductors in the tray or seated) stop being
     integrated until something awake touches them. The arm never sleeps; the Stewart platform
-    sleeps when still (sim.stewart.PLATFORM_SLEEP), and with it the parts seated in its plate.
+    sleeps when still (serpar.sim.stewart.PLATFORM_SLEEP), and with it the parts seated in its plate.
     36 resting conductors otherwise cost 4x the step time of the empty cell."""
     sleep_tolerance: float = 1e-6
     """Velocity below which a tree may fall asleep [m/s, rotations weighted by dof_length].

@@ -10,11 +10,10 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 from scipy.optimize import least_squares
-
-from sim import names
-from sim.arm import FINGER_JOINT_NAMES, Q_MAX, Q_MIN, TCP_SITE
-from sim.errors import ConfigError, UnknownNameError
-from sim.scene import Scene
+from serpar.errors import ConfigError, UnknownNameError
+from serpar.sim import names
+from serpar.sim.arm import FINGER_JOINT_NAMES, Q_MAX, Q_MIN, TCP_SITE
+from serpar.sim.scene import Scene
 
 STATES: tuple[str, ...] = ("home", "inspect")
 GRASP_HEIGHT = 0.006

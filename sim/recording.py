@@ -9,7 +9,6 @@ it knows nothing about where the numbers came from.
 from __future__ import annotations
 
 import json
-import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -17,31 +16,15 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
-
-from sim.errors import SimError
+from serpar.errors import SerparError
+from serpar.sim.channels import KNOWN_HELP, TIME, is_channel
 
 SCHEMA_VERSION = 1
 SOURCES = ("sim", "real")
 FORMATS = ("parquet", "csv")
 TABLES = ("signals", "measurements")
 
-_CHANNEL_PATTERNS = (
-    r"time", r"phase",
-    r"q[1-7]", r"dq[1-7]", r"tau_J[1-7]", r"tau_J_d[1-7]",  # libfranka RobotState names
-    r"O_F_ext_hat_K[1-6]",  # libfranka: estimated external wrench at the TCP, base frame
-    r"O_T_EE_(x|y|z)", r"O_T_EE_q(w|x|y|z)",  # TCP pose (libfranka O_T_EE, as position + quaternion)
-    r"leg_cmd[1-6]", r"leg[1-6]",  # Stewart: commanded and measured leg lengths [m]
-    r"platform_(x|y|z)", r"platform_q(w|x|y|z)",  # Stewart platform pose in its base frame
-    r"gripper_width", r"contact_force_(x|y|z)",
-    r"x_[A-Za-z0-9_]+",  # user channels: any name starting with x_
-)
-_CHANNEL_RE = re.compile("|".join(f"(?:{p})" for p in _CHANNEL_PATTERNS))
-KNOWN_CHANNELS_HELP = ("time, phase, q1..7, dq1..7, tau_J1..7, tau_J_d1..7, O_F_ext_hat_K1..6, "
-                       "O_T_EE_x/y/z/qw/qx/qy/qz, leg_cmd1..6, leg1..6, platform_x/y/z/qw/qx/qy/qz, "
-                       "gripper_width, contact_force_x/y/z, x_<anything>")
-
-
-class RecordingError(SimError, ValueError):
+class RecordingError(SerparError, ValueError):
     """A recording that does not follow the schema (one line, naming the problem)."""
 
 
@@ -107,10 +90,10 @@ class RecordingMeta:
 
 def check_channels(channels: tuple[str, ...] | list[str]) -> None:
     """Every name must be a schema channel; 'time' must be present, names unique."""
-    bad = [c for c in channels if not _CHANNEL_RE.fullmatch(c)]
+    bad = [c for c in channels if not is_channel(c)]
     if bad:
-        raise RecordingError(f"unknown channel(s) {', '.join(bad)}; valid: {KNOWN_CHANNELS_HELP}")
-    if "time" not in channels:
+        raise RecordingError(f"unknown channel(s) {', '.join(bad)}; valid: {KNOWN_HELP}")
+    if TIME not in channels:
         raise RecordingError("the signals need a 'time' channel [s]")
     if len(set(channels)) != len(channels):
         raise RecordingError("channel names repeat")

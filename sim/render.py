@@ -6,9 +6,8 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-
-from sim.cameras import SENSOR_PIXELS
-from sim.errors import ConfigError, UnknownNameError
+from serpar.errors import ConfigError, UnknownNameError
+from serpar.sim.cameras import SENSOR_PIXELS
 
 OVERVIEW = "overview"
 """A free camera for pictures of the whole cell (not one of the stereo cameras)."""

@@ -12,12 +12,11 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-
-from sim.baseplate import BaseplateConfig, build_baseplate_spec
-from sim.conductor import ConductorConfig, add_conductor_geoms
-from sim.contact import contact_force_on
-from sim.errors import ConfigError
-from sim.physics import PhysicsConfig
+from serpar.errors import ConfigError
+from serpar.sim.baseplate import BaseplateConfig, build_baseplate_spec
+from serpar.sim.conductor import ConductorConfig, add_conductor_geoms
+from serpar.sim.contact import contact_force_on
+from serpar.sim.physics import PhysicsConfig
 
 
 @dataclass(frozen=True)

@@ -12,21 +12,20 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
-
-from sim import names
-from sim.arm import ACTUATOR_NAMES, HOME_Q, JOINT_NAMES, PAD_GEOMS, build_arm_spec
-from sim.arm_plant import ArmPlantChanges, apply_arm_plant
-from sim.baseplate import BaseplateConfig, build_baseplate_spec
-from sim.calibration_board import CheckerboardConfig, add_board
-from sim.cameras import DEFAULT_PAIRS, SENSOR_PIXELS, StereoPairConfig, add_stereo_pair
-from sim.conductor import ConductorConfig, build_conductor_spec
-from sim.contact import add_plate_contact_sensor
-from sim.errors import ConfigError, SimError
-from sim.physics import PhysicsConfig
-from sim.seat_lock import PLATE_BODY
-from sim.stewart import StewartConfig, build_stewart_spec, home_strokes
-from sim.tolerances import DISTRIBUTIONS, DrawnDiameters, draw_diameters
-from sim.tray import TrayConfig, build_tray_spec
+from serpar.errors import ConfigError, SerparError
+from serpar.sim import names
+from serpar.sim.arm import ACTUATOR_NAMES, HOME_Q, JOINT_NAMES, PAD_GEOMS, build_arm_spec
+from serpar.sim.baseplate import BaseplateConfig, build_baseplate_spec
+from serpar.sim.calibration_board import CheckerboardConfig, add_board
+from serpar.sim.cameras import DEFAULT_PAIRS, SENSOR_PIXELS, StereoPairConfig, add_stereo_pair
+from serpar.sim.conductor import ConductorConfig, build_conductor_spec
+from serpar.sim.contact import add_plate_contact_sensor
+from serpar.sim.physics import PhysicsConfig
+from serpar.sim.plants.arm_changes import ArmPlantChanges, apply_arm_plant
+from serpar.sim.seat_lock import PLATE_BODY
+from serpar.sim.stewart import StewartConfig, build_stewart_spec, home_strokes
+from serpar.sim.tolerances import DISTRIBUTIONS, DrawnDiameters, draw_diameters
+from serpar.sim.tray import TrayConfig, build_tray_spec
 
 
 @dataclass(frozen=True)
@@ -56,7 +55,7 @@ class SceneConfig:
     """A checkerboard mounted on the hand for camera calibration (None: the working gripper only)."""
     arm_plant: ArmPlantChanges | None = None
     """The arm's physics beyond the nominal MJCF, from a diagnosis of the real cell
-    (``EpisodeConfig.plant_model``; sim/arm_plant.py). Its joint friction, when it sets one,
+    (``EpisodeConfig.plant_model``; sim/plants/arm_changes.py). Its joint friction, when it sets one,
     replaces ``arm_joint_friction``."""
 
     def __post_init__(self) -> None:
@@ -209,13 +208,13 @@ class Scene:
         controls and activations by name, and keeps the time). `model` and `data` are new
         objects afterwards. Only the tray's and the conductors' ids may move (a conductor body
         moved into the plate); a change that shifts any other id, which controllers and
-        recorders hold, raises SimError."""
+        recorders hold, raises SerparError."""
         before = _fixed_ids(self.model)
         model, data = self.spec.recompile(self.model, self.data)
         after = _fixed_ids(model)
         if after != before:
             moved = sorted(name for (kind, name), i in before.items() if after.get((kind, name)) != i)
-            raise SimError(f"recompiling moved the ids of {len(moved)} elements outside the tray and "
+            raise SerparError(f"recompiling moved the ids of {len(moved)} elements outside the tray and "
                            f"conductors (e.g. {moved[:3]}): controllers hold those ids")
         self.model, self.data = model, data
         self.conductor_bodies = _conductor_bodies(model, self.config.n_conductors)

@@ -6,13 +6,12 @@ from collections.abc import Callable
 
 import mujoco
 import numpy as np
-
-from sim.arm import build_arm_spec
-from sim.errors import UnknownNameError
-from sim.physics import PhysicsConfig
-from sim.rig import RigConfig, build_rig
-from sim.scene import SceneConfig, build_scene
-from sim.stewart import StewartConfig, build_stewart_spec, home_strokes
+from serpar.errors import UnknownNameError
+from serpar.sim.arm import build_arm_spec
+from serpar.sim.physics import PhysicsConfig
+from serpar.sim.rig import RigConfig, build_rig
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.sim.stewart import StewartConfig, build_stewart_spec, home_strokes
 
 
 def _standalone(spec: mujoco.MjSpec, physics: PhysicsConfig) -> tuple[mujoco.MjModel, mujoco.MjData]:

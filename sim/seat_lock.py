@@ -22,12 +22,11 @@ from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
-
-from sim import names
-from sim.errors import SimError
+from serpar.errors import SerparError
+from serpar.sim import names
 
 if TYPE_CHECKING:
-    from sim.scene import Scene
+    from serpar.sim.scene import Scene
 
 PLATE_BODY = names.PLATE + "baseplate"
 _COPY = "_seated"
@@ -51,11 +50,11 @@ def _pose_in_plate(model: mujoco.MjModel, data: mujoco.MjData, body: int) -> tup
 
 def lock_seated(scene: Scene, k: int) -> None:
     """Make conductor k a rigid part of the plate where it is now; recompiles `scene` (its model
-    and data are new objects afterwards: see :meth:`sim.scene.Scene.recompile`)."""
+    and data are new objects afterwards: see :meth:`serpar.sim.scene.Scene.recompile`)."""
     if not 0 <= k < scene.config.n_conductors:
-        raise SimError(f"conductor {k} out of range: the scene has conductors 0..{scene.config.n_conductors - 1}")
+        raise SerparError(f"conductor {k} out of range: the scene has conductors 0..{scene.config.n_conductors - 1}")
     if is_locked(scene, k):
-        raise SimError(f"conductor {k} is already locked in the plate")
+        raise SerparError(f"conductor {k} is already locked in the plate")
     spec, m, d = scene.spec, scene.model, scene.data
     pos, quat = _pose_in_plate(m, d, m.body(names.conductor_body(k)).id)
     original = spec.body(names.conductor_body(k))

@@ -17,7 +17,7 @@ every pose: with locked legs the platform has a self-motion and falls along it).
 and 2, a likely misprint; see assets/stewart/README.md.
 
 The maths (IK, FK, leg Jacobian, hinge angles, limits) is in
-:mod:`controllers.stewart_kinematics`, the joint table in :mod:`sim.stewart_table`;
+:mod:`serpar.kinematics.stewart_kinematics`, the joint table in :mod:`serpar.kinematics.stewart_table`;
 this module builds the MuJoCo model and delegates to them.
 """
 
@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-
-from controllers.rotations import quat_to_rot
-from controllers.stewart_kinematics import (
+from serpar.errors import ConfigError
+from serpar.kinematics.rotations import quat_to_rot
+from serpar.kinematics.stewart_kinematics import (
     N_LEGS,
     StewartGeometry,
     forward_kinematics,
@@ -37,9 +37,8 @@ from controllers.stewart_kinematics import (
     jacobian,
     singularity_measure,
 )
-from sim.errors import ConfigError
-from sim.physics import PhysicsConfig
-from sim.stewart_table import load_joint_table, table_geometry
+from serpar.kinematics.stewart_table import load_joint_table, table_geometry
+from serpar.sim.physics import PhysicsConfig
 
 __all__ = ["N_LEGS", "StewartConfig", "build_stewart_spec", "built_geometry", "home_strokes",
            "initial_pose", "leg_space_masses",

@@ -10,8 +10,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-
-from sim.errors import ConfigError
+from serpar.errors import ConfigError
 
 Distribution = Literal["uniform", "normal"]
 DISTRIBUTIONS: tuple[str, ...] = ("uniform", "normal")

@@ -12,9 +12,8 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-
-from sim.errors import ConfigError
-from sim.holes import add_grid_plate, grid_centres
+from serpar.errors import ConfigError
+from serpar.sim.holes import add_grid_plate, grid_centres
 
 TRAY_RGBA = (0.15, 0.30, 0.55, 1.0)  # blue ESD-safe polymer: brass parts stand out
 

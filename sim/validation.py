@@ -12,13 +12,12 @@ from dataclasses import asdict, dataclass
 
 import mujoco
 import numpy as np
-
-from sim.errors import UnknownNameError
-from sim.physics import PhysicsConfig
-from sim.rig import RigConfig, build_rig
-from sim.scene_noise import NOISY_SCENES, step_with_noise
-from sim.stewart_checks import loop_hold_and_stroke
-from sim.tolerances import HOLE_H7, JOURNAL_H6
+from serpar.errors import UnknownNameError
+from serpar.sim.loop_closure import loop_hold_and_stroke
+from serpar.sim.physics import PhysicsConfig
+from serpar.sim.rig import RigConfig, build_rig
+from serpar.sim.scene_noise import NOISY_SCENES, step_with_noise
+from serpar.sim.tolerances import HOLE_H7, JOURNAL_H6
 
 # The widest H7/h6 pair (16 um diametral) is the worst case for jamming offsets and
 # penetration; a tight pair (2 um) tests that nothing spurious blocks an aligned journal.

@@ -17,18 +17,17 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-
-from controllers.arm_controller import ControlLaw
-from sim.errors import SimError, UnstableSimulation
-from sim.scene import Scene, build_scene
-from tasks.arm_checks import controller_config
-from tasks.cell_runtime import CellRuntime
-from tasks.episode_config import EpisodeConfig, Outcome, scene_config
-from tasks.episode_steps import CycleFailure, HoleCycle
-from tasks.stewart_correction import PlateCommander
-from tasks.stewart_model import believed_errors
-from vision.camera import StereoPair
-from vision.imaging import Camera, ImagingConfig
+from serpar.controllers.arm_controller import ControlLaw, controller_config
+from serpar.controllers.cell_runtime import CellRuntime
+from serpar.controllers.plate_commander import PlateCommander
+from serpar.errors import SerparError, UnstableSimulation
+from serpar.sim.scene import Scene, build_scene
+from serpar.tasks.episode_config import EpisodeConfig, Outcome, scene_config
+from serpar.tasks.episode_recorder import EpisodeRecorder
+from serpar.tasks.episode_steps import CycleFailure, HoleCycle
+from serpar.tasks.platform_model import believed_errors
+from serpar.vision.camera import StereoPair
+from serpar.vision.imaging import Camera, ImagingConfig
 
 SETTLE_S = 0.3
 
@@ -119,7 +118,6 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
     camera = Camera(rt.scene.model, imaging, seed=cfg.seed)
     recorder = None
     if recording is not None:
-        from tasks.episode_recorder import EpisodeRecorder
 
         recorder = EpisodeRecorder(rt, recording, {"episode_config": dataclasses.asdict(cfg)},
                                    name=f"episode_{cfg.seed}")
@@ -144,7 +142,7 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
                 result = cycle.run(wanted)
             except CycleFailure as failure:
                 result = failure.as_result()
-            except (UnstableSimulation, SimError) as exc:
+            except (UnstableSimulation, SerparError) as exc:
                 result, broken = cycle.fault_result(exc), True
             except (ValueError, IndexError, ArithmeticError) as exc:  # a defect: record it, go on
                 result, broken = cycle.fault_result(RuntimeError(f"{type(exc).__name__}: {exc}")), True

@@ -1,6 +1,6 @@
 """What one assembly episode is (issue 5): a frozen, validated config, the fixed outcome
 taxonomy, and the success-rate interval. YAML only at the command-line edge
-(`sim.config_io.load_yaml_config(EpisodeConfig, path)`, unknown keys rejected)."""
+(`serpar.sim.config_io.load_yaml_config(EpisodeConfig, path)`, unknown keys rejected)."""
 
 from __future__ import annotations
 
@@ -9,15 +9,15 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from assets import asset_path
-from sim.arm import PANDA_COULOMB_FRICTION
-from sim.arm_plant import ArmPlantChanges
-from sim.errors import ConfigError
-from sim.physics import PhysicsConfig
-from sim.scene import SceneConfig
-from sim.stewart import StewartConfig
-from sim.tolerances import DISTRIBUTIONS
+from serpar.errors import ConfigError
+from serpar.kinematics.stewart_table import table5_errors
+from serpar.sim.arm import PANDA_COULOMB_FRICTION
+from serpar.sim.physics import PhysicsConfig
+from serpar.sim.plants.arm_changes import ArmPlantChanges
+from serpar.sim.plants.from_model_file import arm_plant_from_file
+from serpar.sim.scene import SceneConfig
+from serpar.sim.stewart import StewartConfig
+from serpar.sim.tolerances import DISTRIBUTIONS
 
 CONTROLLERS = ("force_position", "impedance")
 ERROR_MODES = ("table5", "random", "none")
@@ -37,12 +37,6 @@ class Outcome(enum.Enum):
     OVERFORCE = "overforce"
     TIMEOUT = "timeout"
     DROPPED = "dropped"
-
-
-def table5_errors() -> np.ndarray:
-    """(6, 7) seed 000 Table 5 errors in metres: per leg dl, dP xyz, dB xyz."""
-    rows = np.loadtxt(asset_path("stewart", "table5_errors.csv"), delimiter=",", comments="#", skiprows=3)
-    return rows[:, 1:] * 1e-3
 
 
 @dataclass(frozen=True)
@@ -83,11 +77,11 @@ class EpisodeConfig:
     """The platform's model of itself in step 5: 'campaign' = identified from a simulated
     motion-capture campaign in this cell (seed 000 §4.2; run once, then cached), 'none' = the
     nominal model (uncalibrated), or the path of an identified-parameters file
-    (`tasks.stewart_params`)."""
+    (`serpar.calibration.stewart_params`)."""
     hidden_errors: HiddenStewartErrors = field(default_factory=HiddenStewartErrors)
     arm_friction: float = 0.3
     """Dry joint friction of the simulated arm as a fraction of a real Panda's
-    (:data:`sim.arm.PANDA_COULOMB_FRICTION`); the controllers do not model it. The torque loop
+    (:data:`serpar.sim.arm.PANDA_COULOMB_FRICTION`); the controllers do not model it. The torque loop
     around the Panda's link-side sensors removes most motor friction; 0.3 leaves the arm
     ~0.1-0.4 mm off a commanded pose, like the seed's measured Panda (Fig. 3: up to 0.4 mm, within
     0.1 mm near the goal; Fig. 5: < 0.2 mm), where the frictionless arm is 0.02 mm off. This is
@@ -99,12 +93,12 @@ class EpisodeConfig:
     hole_time_limit_s: float = 10.0
     plant_model: str | None = None
     """Path of a diagnosis model file (``serpar diagnose --report``'s ``<stem>.model.json``): the
-    simulated arm gets the physics that diagnosis found (identify/diagnosis/plant_model.py; its
+    simulated arm gets the physics that diagnosis found (sim/plants/from_model_file.py; its
     joint friction, if any, replaces arm_friction). None = the nominal arm."""
 
     contact_friction: float | None = None
     """Journal/bore sliding friction of the cell (None: ``PhysicsConfig.precision_friction``);
-    a concealed effect for the diagnosis of insertions (identify/diagnosis/insertion.py)."""
+    a concealed effect for the diagnosis of insertions (diagnosis/insertion_friction.py)."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.seed, int) or isinstance(self.seed, bool):
@@ -145,7 +139,6 @@ def _arm_plant(path: str | None) -> ArmPlantChanges | None:
         return None
     if not isinstance(path, str) or not path:
         raise ConfigError(f"plant_model {path!r}: the path of a diagnosis model file, or null")
-    from identify.diagnosis.plant_model import arm_plant_from_file
 
     return arm_plant_from_file(path)
 

@@ -17,38 +17,40 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-
-from sim.contact import ContactForceProbe
-from sim.recording import PhaseSegment, Recording, RecordingMeta, SignalRecorder, write_recording
-from sim.scene import Scene
-from sim.seat_lock import PLATE_BODY
-from tasks.cell_runtime import CellRuntime
+from serpar.controllers.cell_runtime import CellRuntime
+from serpar.sim import channels as ch
+from serpar.sim.contact import ContactForceProbe
+from serpar.sim.recording import (
+    PhaseSegment,
+    Recording,
+    RecordingMeta,
+    SignalRecorder,
+    write_recording,
+)
+from serpar.sim.scene import Scene
+from serpar.sim.seat_lock import PLATE_BODY
+from serpar.tasks import rerun_scene
 
 POSE_HZ = 50.0
 """Body poses for the rerun file (the signals are at the control rate)."""
 RRD_NAME = "episode.rrd"
 
 
-def _n(prefix: str, k: int) -> tuple[str, ...]:
-    return tuple(f"{prefix}{i}" for i in range(1, k + 1))
-
-
-_XYZQ = ("x", "y", "z", "qw", "qx", "qy", "qz")
-ARM = ("time", *_n("q", 7), *_n("dq", 7), *_n("tau_J", 7), *_n("tau_J_d", 7), *_n("O_F_ext_hat_K", 6),
-       *(f"O_T_EE_{a}" for a in _XYZQ))
-PLANT = (*_n("leg_cmd", 6), *_n("leg", 6), *(f"platform_{a}" for a in _XYZQ), "gripper_width",
-         "contact_force_x", "contact_force_y", "contact_force_z")
-CHANNELS = (ARM[0], "phase", *ARM[1:], *PLANT, "x_sim_time")
-_I = {c: i for i, c in enumerate(c for c in CHANNELS if c != "phase")}
+ARM = (ch.TIME, *ch.Q, *ch.DQ, *ch.TAU_J, *ch.TAU_J_D, *ch.F_EXT, *ch.TCP_POSITION, *ch.TCP_QUAT)
+PLANT = (*ch.LEG_CMD, *ch.LEG, *ch.PLATFORM_POSITION, *ch.PLATFORM_QUAT, ch.GRIPPER_WIDTH,
+         *ch.CONTACT_FORCE)
+SIM_TIME = ch.USER_PREFIX + "sim_time"
+CHANNELS = (ARM[0], ch.PHASE, *ARM[1:], *PLANT, SIM_TIME)
+_I = {c: i for i, c in enumerate(c for c in CHANNELS if c != ch.PHASE)}
 
 
 def _span(first: str, last: str) -> slice:
     return slice(_I[first], _I[last] + 1)
 
 
-Q, DQ, TJ, TJD = _span("q1", "q7"), _span("dq1", "dq7"), _span("tau_J1", "tau_J7"), _span("tau_J_d1", "tau_J_d7")
-F, EE_P, EE_Q = _span("O_F_ext_hat_K1", "O_F_ext_hat_K6"), _span("O_T_EE_x", "O_T_EE_z"), _span("O_T_EE_qw", "O_T_EE_qz")
-PL = _span("leg_cmd1", "contact_force_z")
+Q, DQ, TJ, TJD = (_span(c[0], c[-1]) for c in (ch.Q, ch.DQ, ch.TAU_J, ch.TAU_J_D))
+F, EE_P, EE_Q = (_span(c[0], c[-1]) for c in (ch.F_EXT, ch.TCP_POSITION, ch.TCP_QUAT))
+PL = _span(PLANT[0], PLANT[-1])
 NOTES = {
     "time": "start of each 1 ms control period; continues across state restores (x_sim_time is the cell's clock)",
     "q, dq, tau_J": "the arm's sensor model (20-bit encoders, velocity and joint torque noise, torque bias drift)",
@@ -77,7 +79,6 @@ class EpisodeRecorder:
 
     def __init__(self, rt: CellRuntime, folder: str | Path, model: dict[str, object],
                  name: str = "episode") -> None:
-        from tasks import rerun_scene
 
         self.rt, self.folder, self.model = rt, Path(folder), model
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -146,10 +147,10 @@ class EpisodeRecorder:
         p[6:12] = d.qpos[self._leg_qpos]
         p[0:12] += self._l_min
         site, rbt = self.rt.stewart.platform_site, self._base_rt
-        p[_I["platform_x"] - base:_I["platform_z"] - base + 1] = rbt @ (d.site_xpos[site] - self._base_pos)
+        p[_I[ch.PLATFORM_POSITION[0]] - base:_I[ch.PLATFORM_POSITION[-1]] - base + 1] = rbt @ (d.site_xpos[site] - self._base_pos)
         mujoco.mju_mat2Quat(self._quat, (rbt @ d.site_xmat[site].reshape(3, 3)).ravel())
-        p[_I["platform_qw"] - base:_I["platform_qz"] - base + 1] = self._quat
-        p[_I["gripper_width"] - base] = d.qpos[self._fingers[0]] + d.qpos[self._fingers[1]]
+        p[_I[ch.PLATFORM_QUAT[0]] - base:_I[ch.PLATFORM_QUAT[-1]] - base + 1] = self._quat
+        p[_I[ch.GRIPPER_WIDTH] - base] = d.qpos[self._fingers[0]] + d.qpos[self._fingers[1]]
         p[-3:] = self._plate_load.force(d)
 
     # --- rare events ---------------------------------------------------------------------
@@ -166,12 +167,12 @@ class EpisodeRecorder:
         """What has been recorded so far, in the schema (DESIGN.md §4)."""
         sensors = self.rt.arm.config.sensors
         step = 2 * np.pi / sensors.encoder_counts_per_rev if sensors.encoder_counts_per_rev else 0.0
-        sigma = {**{c: step / np.sqrt(12) for c in _n("q", 7)},  # uniform quantisation error
-                 **{c: sensors.velocity_noise_std for c in _n("dq", 7)},
-                 **{c: sensors.torque_noise_std for c in _n("tau_J", 7)}}
+        sigma = {**{c: step / np.sqrt(12) for c in ch.Q},  # uniform quantisation error
+                 **{c: sensors.velocity_noise_std for c in ch.DQ},
+                 **{c: sensors.torque_noise_std for c in ch.TAU_J}}
         model = json.loads(json.dumps({**self.model, "arm_sensors": dataclasses.asdict(sensors),
                                        "stewart_l_min": self._l_min, "channel_notes": NOTES}, default=str))
-        time = self._signals.column("time")  # a phase ends at its last row
+        time = self._signals.column(ch.TIME)  # a phase ends at its last row
         ends = [*time[np.searchsorted(time, self._phase_starts[1:]) - 1], self._last]
         phases = tuple(PhaseSegment(n, s, float(e)) for n, s, e in zip(self._phase_names, self._phase_starts, ends))
         meta = RecordingMeta(source="sim", sample_rate_hz=1.0 / self._dt, channels=CHANNELS, noise_sigma=sigma,
@@ -182,8 +183,8 @@ class EpisodeRecorder:
         """Write signals.parquet and meta.json, finish the rerun file; returns the folder."""
         write_recording(self.folder, self.recording())
         self._poses.send(self._rec)
-        self._rr.send_signals(self._rec, self._signals.column("time"),
-                              {c: self._signals.column(c) for c in CHANNELS if c not in ("time", "phase", "x_sim_time")})
+        self._rr.send_signals(self._rec, self._signals.column(ch.TIME),
+                              {c: self._signals.column(c) for c in CHANNELS if c not in (ch.TIME, ch.PHASE, SIM_TIME)})
         self._rec.flush()
         self._rec.disconnect()
         return self.folder

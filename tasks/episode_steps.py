@@ -2,7 +2,7 @@
 
 The cell's knowledge: images from the two calibrated stereo pairs, the arm's measured joints
 through its nominal model, the wrench estimate, and the Stewart platform's model with the
-poses it commanded. The simulator's truth enters only the scoring (:mod:`tasks.insertion`)
+poses it commanded. The simulator's truth enters only the scoring (:mod:`serpar.tasks.insertion`)
 and the drawn clearance written into the record.
 """
 
@@ -12,14 +12,14 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-
-from controllers.arm_controller import ControlLaw
-from sim.scene import SceneConfig
-from sim.seat_lock import lock_seated
-from sim.tolerances import BODY_H6
-from tasks.cell_runtime import CellRuntime
-from tasks.episode_config import EpisodeConfig, Outcome
-from tasks.hole_cycle import (
+from serpar.controllers.arm_controller import ControlLaw
+from serpar.controllers.cell_runtime import CellRuntime
+from serpar.controllers.plate_commander import PlateCommander, inverse
+from serpar.sim.scene import SceneConfig
+from serpar.sim.seat_lock import lock_seated
+from serpar.sim.tolerances import BODY_H6
+from serpar.tasks.episode_config import EpisodeConfig, Outcome
+from serpar.tasks.hole_cycle import (
     CLEAR_Z,
     HAND_DOWN,
     HOVER,
@@ -30,16 +30,15 @@ from tasks.hole_cycle import (
     seat_tcp,
     travel,
 )
-from tasks.insertion import InsertionConfig, insert
-from tasks.motions import tcp_pose
-from tasks.stewart_correction import PlateCommander, inverse
-from vision.camera import StereoPair
-from vision.errors import ConductorNotInView, VisionError
-from vision.imaging import Camera
-from vision.inhand import inspect_in_hand
-from vision.layout import plate_in_view, plate_layout, tray_pockets, tray_region
-from vision.plate import PlateMeasurement, locate_holes
-from vision.tray import locate_conductors
+from serpar.tasks.insertion import InsertionConfig, insert
+from serpar.tasks.motions import tcp_pose
+from serpar.vision.camera import StereoPair
+from serpar.vision.errors import ConductorNotInView, VisionError
+from serpar.vision.imaging import Camera
+from serpar.vision.inhand import inspect_in_hand
+from serpar.vision.layout import plate_in_view, plate_layout, tray_pockets, tray_region
+from serpar.vision.plate import PlateMeasurement, locate_holes
+from serpar.vision.tray_conductors import locate_conductors
 
 TOP = ("top_left", "top_right")
 INSPECT = ("inspect_left", "inspect_right")

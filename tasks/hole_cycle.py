@@ -4,21 +4,20 @@ them: every target comes from vision and the arm's measured joints, never from t
 The poses: parts are taken from the tray and presented to the in-hand cameras with the
 fingers closing along the world x axis (across the inspect cameras' line of sight), TCP z
 down; at the inspection point the TCP leans by INSPECT_ROLL about the viewing direction (the
-slanted-edge trick of :mod:`tasks.vision_inhand_scenes`). Free-space moves first rise to
+slanted-edge trick of :mod:`serpar.checks.vision_inhand_scenes`). Free-space moves first rise to
 CLEAR_Z, above everything on the plate and the tray, then travel level.
 """
 
 from __future__ import annotations
 
 import numpy as np
-
-from controllers.rotations import so3_exp
-from sim.poses import GRASP_HEIGHT
-from sim.scene import Scene
-from tasks.cell_runtime import CellRuntime
-from tasks.motions import move_tcp, tcp_pose
-from vision.inhand import InHandMeasurement
-from vision.tray import ConductorSighting
+from serpar.controllers.cell_runtime import CellRuntime
+from serpar.kinematics.rotations import so3_exp
+from serpar.sim.poses import GRASP_HEIGHT
+from serpar.sim.scene import Scene
+from serpar.tasks.motions import move_tcp, tcp_pose
+from serpar.vision.inhand import InHandMeasurement
+from serpar.vision.tray_conductors import ConductorSighting
 
 HAND_DOWN = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 """TCP x along world y, fingers (TCP y) closing along world x, TCP z down."""

@@ -14,14 +14,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-
-from controllers.arm_controller import ControlLaw
-from controllers.arm_laws import CartesianTarget, ForceTarget
-from sim import names
-from sim.contact import aim_plate_contact
-from sim.errors import ConfigError
-from tasks.cell_runtime import CellRuntime
-from tasks.episode_config import Outcome
+from serpar.controllers.arm_controller import ControlLaw
+from serpar.controllers.arm_laws import CartesianTarget, ForceTarget
+from serpar.controllers.cell_runtime import CellRuntime
+from serpar.errors import ConfigError
+from serpar.sim import names
+from serpar.sim.contact import aim_plate_contact
+from serpar.tasks.episode_config import Outcome
 
 
 @dataclass(frozen=True)

@@ -7,15 +7,14 @@ at the measured joints); nothing here reads the simulator's true state.
 from __future__ import annotations
 
 import numpy as np
-
-from controllers.arm_controller import ControlLaw
-from controllers.arm_laws import CartesianTarget, orientation_error
-from controllers.trajectory import PoseMove
-from tasks.cell_runtime import CellRuntime
+from serpar.controllers.arm_controller import ControlLaw
+from serpar.controllers.arm_laws import CartesianTarget, orientation_error
+from serpar.controllers.cell_runtime import CellRuntime
+from serpar.controllers.trajectory import PoseMove
 
 DEFAULT_MOVE_SPEED = 0.25
 """Default peak TCP speed of `move_tcp` [m/s] (the min-jerk peak is 1.875x the mean); the
-episode travels at `tasks.hole_cycle.TRAVEL_SPEED`."""
+episode travels at `serpar.tasks.hole_cycle.TRAVEL_SPEED`."""
 TURN_SPEED = 1.0
 """Peak rotation speed of free-space moves [rad/s]."""
 MIN_MOVE_S = 0.15

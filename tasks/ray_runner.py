@@ -11,8 +11,9 @@ import socket
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-from sim.errors import ConfigError
-from tasks.episode_config import EpisodeConfig
+from serpar.calibration.camera_cache import cache_dir
+from serpar.errors import ConfigError
+from serpar.tasks.episode_config import EpisodeConfig
 
 RAY_MISSING = "--ray needs the cluster extra: pip install 'serpar[cluster]'"
 
@@ -54,7 +55,6 @@ def _connect(ray: Any, address: str) -> bool:
     "ray://host:port": a remote one); True if this call started Ray here."""
     if ray.is_initialized():  # a caller (or a test) already runs Ray: use it, leave it running
         return False
-    from tasks.camera_cache import cache_dir
 
     # workers on this machine then find the driver's calibration cache and source tree; other
     # machines need the same paths (a shared SERPAR_CACHE) or calibrate there once

@@ -1,5 +1,5 @@
 """Many episodes: seeds -> records, in this process, in worker processes or on Ray
-(:mod:`tasks.ray_runner`), and the summary.
+(:mod:`serpar.tasks.ray_runner`), and the summary.
 
 Each episode depends only on its config (seed included), so a run with W workers gives the
 same records as a serial run. Records stream to a callback as they arrive (JSON lines on
@@ -19,8 +19,12 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from dataclasses import dataclass
 from pathlib import Path
 
-from sim.errors import ConfigError
-from tasks.episode_config import EpisodeConfig, Outcome, wilson_interval
+from serpar.calibration.camera_cache import calibrated_pairs
+from serpar.errors import ConfigError
+from serpar.tasks.episode import run_episode
+from serpar.tasks.episode_config import EpisodeConfig, Outcome, wilson_interval
+from serpar.tasks.platform_model import prepare_models
+from serpar.tasks.ray_runner import ray_results
 
 Record = dict[str, object]
 Job = Callable[..., list[Record]]
@@ -46,8 +50,6 @@ def run_one(cfg: EpisodeConfig, on_hole: Callable[[Record], None] | None = None,
     ablation arm) is written into every record as "config"; `record_dir` records the episode
     into :func:`recording_folder` (the records are the same either way)."""
     tag = {} if label is None else {"config": label}
-    from tasks.camera_cache import calibrated_pairs
-    from tasks.episode import run_episode
 
     records: list[Record] = []
 
@@ -57,7 +59,6 @@ def run_one(cfg: EpisodeConfig, on_hole: Callable[[Record], None] | None = None,
             on_hole(records[-1])
 
     try:
-        from tasks.stewart_model import prepare_models
 
         prepare_models([cfg])  # a bad parameters file fails here, before any camera calibration
         folder = None if record_dir is None else recording_folder(record_dir, cfg.seed, label)
@@ -77,7 +78,7 @@ def run_many(configs: Sequence[EpisodeConfig], workers: int = 1,
     each hole record as it ends (in-process runs; workers report per episode); `labels[k]`
     tags config k's records; `record_dir` records every episode (see :func:`run_one`); `job`
     replaces :func:`run_one`; `ray_address` runs the episodes on Ray instead of local workers
-    (:mod:`tasks.ray_runner`). On Ctrl-C the records of finished episodes are returned and the
+    (:mod:`serpar.tasks.ray_runner`). On Ctrl-C the records of finished episodes are returned and the
     workers are stopped."""
     out: list[Record] = []
     tags = list(labels) if labels is not None else [None] * len(configs)
@@ -104,7 +105,6 @@ def run_many(configs: Sequence[EpisodeConfig], workers: int = 1,
 def _results(configs: Sequence[EpisodeConfig], workers: int, on_hole: Callable[[Record], None] | None,
              labels: Sequence[str | None], job: Job, ray_address: str | None) -> Iterator[list[Record]]:
     if ray_address is not None:
-        from tasks.ray_runner import ray_results
 
         yield from ray_results(configs, labels, job, ray_address)
         return

@@ -5,12 +5,17 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-
-from identify.arm_calibration import calibrate, identifiability_of
-from identify.arm_measurements import PointSet, PositionSet
-from identify.arm_model import ArmModel, chain_forward, initial_parameters, layout, predict
-from identify.poe_design import tool_ik
-from sim.arm import Q_MAX, Q_MIN
+from serpar.calibration.arm_calibration import calibrate, identifiability_of
+from serpar.calibration.arm_error_models import (
+    ArmModel,
+    chain_forward,
+    initial_parameters,
+    layout,
+    predict,
+)
+from serpar.calibration.poe_design import tool_ik
+from serpar.sim.arm import Q_MAX, Q_MIN
+from serpar.sim.arm_measurements import PointSet, PositionSet
 
 TOOL = (0.01, 0.05, 0.12)
 LO, HI = np.asarray(Q_MIN) + 0.1, np.asarray(Q_MAX) - 0.1

@@ -5,9 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 
 import numpy as np
-
-from identify.diagnosis.choose import family_from_recording
-from identify.diagnosis.select import diagnose
+from serpar.diagnosis.choose import family_from_recording
+from serpar.diagnosis.select import diagnose
 
 RMS_TARGET = 1.5
 """Held-out RMS after the fit, in units of the noise floor (issue 7)."""

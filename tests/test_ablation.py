@@ -15,13 +15,12 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from sim import names
-from sim.seat_lock import PLATE_BODY, is_locked
-from tasks.ablation import ablation_arms
-from tasks.episode import build_runtime, run_episode
-from tasks.episode_config import EpisodeConfig, Outcome
-from tasks.stewart_model import campaign_file
+from serpar.checks.ablation import ablation_arms
+from serpar.sim import names
+from serpar.sim.seat_lock import PLATE_BODY, is_locked
+from serpar.tasks.episode import build_runtime, run_episode
+from serpar.tasks.episode_config import EpisodeConfig, Outcome
+from serpar.tasks.platform_model import campaign_file
 
 pytestmark = pytest.mark.xdist_group("calibrated")
 
@@ -96,7 +95,7 @@ def calibrated(calibrated_run):
 
 
 def test_a_seated_part_stays_put_while_the_next_hole_is_filled(calibrated_run):
-    """Hole 0's part becomes part of the plate once scored (sim.seat_lock): it must not jump at
+    """Hole 0's part becomes part of the plate once scored (serpar.sim.seat_lock): it must not jump at
     the lock, nor move while the platform carries it ~35 mm to present hole 35 and back."""
     records, drift = calibrated_run
     assert records[0].outcome == Outcome.SUCCESS.value

@@ -7,10 +7,9 @@ import math
 import mujoco
 import numpy as np
 import pytest
-
-from sim import arm
-from sim.errors import ConfigError
-from sim.physics import PhysicsConfig
+from serpar.errors import ConfigError
+from serpar.sim import arm
+from serpar.sim.physics import PhysicsConfig
 
 # Gaz et al., RA-L 2019 (as reproduced in MuJoCo Menagerie franka_emika_panda) [kg].
 PUBLISHED_LINK_MASS = {

@@ -19,17 +19,26 @@ from arm_cal_support import (
     position_set,
     truth,
 )
-
-from identify.arm_calibration import calibrate, calibrate_gravity_aware, identifiability_of
-from identify.arm_design import position_ik
-from identify.arm_measurements import PointSet, PoseSet, PositionSet
-from identify.arm_model import ArmModel, initial_parameters, layout, predict
-from identify.errors import IdentificationError
-from identify.mdh import chain_frames, forward, panda_chain, pose_jacobian
-from identify.panda_data import load_panda_folder
-from sim.arm import mdh_forward_kinematics
-from tasks.arm_calibration_run import real_data_calibration, simulated_calibration
-from tasks.arm_truth import ArmPlant, TruthConfig, build_model, draw_errors, run_campaign
+from serpar.calibration.arm_calibration import (
+    calibrate,
+    calibrate_gravity_aware,
+    identifiability_of,
+)
+from serpar.calibration.arm_campaign import real_data_calibration, simulated_calibration
+from serpar.calibration.arm_design import position_ik
+from serpar.calibration.arm_error_models import ArmModel, initial_parameters, layout, predict
+from serpar.calibration.panda_data import load_panda_folder
+from serpar.errors import IdentificationError
+from serpar.kinematics.mdh import chain_frames, forward, panda_chain, pose_jacobian
+from serpar.sim.arm import mdh_forward_kinematics
+from serpar.sim.arm_measurements import PointSet, PoseSet, PositionSet
+from serpar.sim.plants.static_panda import (
+    ArmPlant,
+    TruthConfig,
+    build_model,
+    draw_errors,
+    run_campaign,
+)
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "panda_1"
 

@@ -8,18 +8,18 @@ import json
 import mujoco
 import numpy as np
 import pytest
-
-from controllers.arm_controller import ArmController, ArmControllerConfig, ControlLaw
-from controllers.arm_laws import ForceTarget, orientation_error
-from controllers.arm_model import require_joint_target
-from controllers.arm_sensors import ArmSensorConfig, quantise
-from controllers.wrench import tcp_wrench
-from serpar.cli import main
-from sim import names
-from sim.arm import HOME_Q
-from sim.errors import ConfigError, LimitError
-from sim.scene import SceneConfig, build_scene
-from tasks.arm_checks import force_position_descent, path_accuracy, press
+from serpar.checks.arm_checks import force_position_descent, path_accuracy, press
+from serpar.cli.entry import main
+from serpar.controllers.arm_controller import ArmController, ArmControllerConfig, ControlLaw
+from serpar.controllers.arm_laws import ForceTarget, orientation_error
+from serpar.controllers.arm_model import require_joint_target
+from serpar.controllers.arm_sensors import ArmSensorConfig
+from serpar.controllers.wrench import tcp_wrench
+from serpar.errors import ConfigError, LimitError
+from serpar.sim import names
+from serpar.sim.arm import HOME_Q
+from serpar.sim.arm_drive import quantise
+from serpar.sim.scene import SceneConfig, build_scene
 
 
 def test_path_to_paper_target_within_paper_bound_with_noise() -> None:

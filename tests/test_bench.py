@@ -4,9 +4,8 @@ speed is the benchmark's job, not a test's)."""
 from __future__ import annotations
 
 import pytest
-
-from sim.errors import ConfigError
-from tasks.bench import BenchConfig, in_contact
+from serpar.checks.bench import BenchConfig, in_contact
+from serpar.errors import ConfigError
 
 
 def test_contact_scenario_presses_the_journal_on_the_plate():

@@ -7,8 +7,7 @@ import sys
 import numpy as np
 import pytest
 from PIL import Image
-
-from serpar.cli import main
+from serpar.cli.entry import main
 
 
 def run(*args: str) -> subprocess.CompletedProcess:

@@ -3,13 +3,12 @@ reads the same force as summing the contacts by hand."""
 
 import mujoco
 import numpy as np
-
-from controllers.arm_controller import ControlLaw
-from controllers.arm_laws import CartesianTarget, ForceTarget
-from sim import names
-from sim.contact import ContactForceProbe, aim_plate_contact, body_geoms
-from sim.scene import SceneConfig
-from tasks.arm_checks import DOWN, press_setup
+from serpar.checks.arm_checks import DOWN, press_setup
+from serpar.controllers.arm_controller import ControlLaw
+from serpar.controllers.arm_laws import CartesianTarget, ForceTarget
+from serpar.sim import names
+from serpar.sim.contact import ContactForceProbe, aim_plate_contact, body_geoms
+from serpar.sim.scene import SceneConfig
 
 
 def test_plate_contact_sensor_matches_the_contact_sum_of_the_part_it_is_aimed_at():

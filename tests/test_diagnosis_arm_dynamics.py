@@ -1,6 +1,6 @@
 """The arm-dynamics domain of ``serpar diagnose``: twins with one concealed effect each, made
-by MuJoCo forward dynamics (tasks/twin_arm_dynamics.py), diagnosed blind by the nominal
-model's inverse dynamics (identify/diagnosis/arm_dynamics*.py).
+by MuJoCo forward dynamics (twins/arm_dynamics_twin.py), diagnosed blind by the nominal
+model's inverse dynamics (diagnosis/arm_dynamics*.py).
 
 Fixed seed 0, 10 s twins (the CLI's default is 20 s) so the file runs in under a minute.
 """
@@ -13,16 +13,14 @@ import json
 import numpy as np
 import pyarrow as pa
 import pytest
-
-from identify.diagnosis.arm_dynamics import CHANNELS, family_from_recording
-from identify.diagnosis.arm_dynamics_effects import EffectModels, _payload_model, _set_payload
-from identify.diagnosis.family import Family
-from identify.diagnosis.fit import fit_model
-from identify.diagnosis.select import at_noise_floor, diagnose, earns
-from identify.errors import IdentificationError
-from sim.errors import ConfigError
-from sim.recording import Recording
-from tasks.twin_arm_dynamics import EFFECTS, make_twin
+from serpar.diagnosis.arm_dynamics_effects import EffectModels, _payload_model, _set_payload
+from serpar.diagnosis.arm_dynamics_family import CHANNELS, family_from_recording
+from serpar.diagnosis.family import Family
+from serpar.diagnosis.fit import fit_model
+from serpar.diagnosis.select import at_noise_floor, diagnose, earns
+from serpar.errors import ConfigError, IdentificationError
+from serpar.sim.recording import Recording
+from serpar.twins.arm_dynamics_twin import EFFECTS, make_twin
 
 SEED = 0
 DURATION = 10.0

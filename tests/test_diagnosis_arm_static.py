@@ -1,5 +1,5 @@
 """Blind identification on concealed static-arm effects (issue 7): each twin is a MuJoCo
-plant with one hidden effect (tasks/twin_arm_static.py), diagnosed without its answer."""
+plant with one hidden effect (twins/arm_static_twin.py), diagnosed without its answer."""
 
 from __future__ import annotations
 
@@ -9,13 +9,12 @@ import numpy as np
 import pyarrow as pa
 import pytest
 from diagnosis_support import RMS_TARGET, assert_jacobian_matches_differences, run_trials
-
-from identify.diagnosis.arm_static import family_from_data
-from identify.diagnosis.arm_static_data import static_data, to_recording
-from identify.diagnosis.choose import family_from_recording
-from identify.errors import IdentificationError
-from sim.recording import Recording, RecordingMeta
-from tasks.twin_arm_static import make_twin
+from serpar.calibration.arm_static_data import static_data, to_recording
+from serpar.diagnosis.arm_static_family import family_from_data
+from serpar.diagnosis.choose import family_from_recording
+from serpar.errors import IdentificationError
+from serpar.sim.recording import Recording, RecordingMeta
+from serpar.twins.arm_static_twin import make_twin
 
 TRIALS = {"none": 0, "geometric": 0, "joint_compliance": 3, "backlash": 0, "encoder": 0,
           "thermal_drift": 0}
@@ -138,7 +137,7 @@ def test_empty_recording_is_not_diagnosable() -> None:
 
 
 def test_recording_round_trip(tmp_path) -> None:
-    from sim.recording import read_recording, write_recording
+    from serpar.sim.recording import read_recording, write_recording
 
     rec, _ = make_twin("encoder", None, 1)
     back = static_data(read_recording(write_recording(tmp_path / "r", rec)))

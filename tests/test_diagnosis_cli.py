@@ -7,10 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from serpar.cli import main
-from sim.csv_import import import_csv, parse_map
-from sim.recording import RecordingError
+from serpar.cli.entry import main
+from serpar.sim.csv_import import import_csv, parse_map
+from serpar.sim.recording import RecordingError
 
 PANDA_1 = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "panda_1"
 
@@ -92,7 +91,7 @@ def test_csv_import_bad_input_is_one_line(tmp_path, text, mapping, match) -> Non
 
 
 def test_csv_measurements_to_diagnosis(tmp_path, capsys) -> None:
-    from tasks.twin_arm_static import make_twin
+    from serpar.twins.arm_static_twin import make_twin
 
     rec, _ = make_twin(None, None, 4)
     m = rec.measurements

@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from identify.diagnosis import Effect, LocateRow
-from identify.diagnosis.locate import locate_rows
-from identify.diagnosis.select import SelectConfig, diagnose
-from identify.errors import IdentificationError
+from serpar.diagnosis import Effect, LocateRow
+from serpar.diagnosis.locate import locate_rows
+from serpar.diagnosis.select import SelectConfig, diagnose
+from serpar.errors import IdentificationError
 
 SIGMA = 0.01
 

@@ -11,18 +11,17 @@ import dataclasses
 import numpy as np
 import pytest
 from diagnosis_support import RMS_TARGET
-
-from identify.diagnosis.choose import family_from_recording
-from identify.diagnosis.config_model import model_from_episode_config
-from identify.diagnosis.episode import EpisodeFamily, free_windows
-from identify.diagnosis.insertion import NOMINAL_MU
-from identify.diagnosis.prior import PriorFamily
-from identify.diagnosis.select import diagnose
-from sim.arm import PANDA_COULOMB_FRICTION
-from sim.errors import ConfigError
-from sim.recording import read_recording
-from tasks.episode import run_episode
-from tasks.episode_config import EpisodeConfig
+from serpar.diagnosis.choose import family_from_recording
+from serpar.diagnosis.config_model import model_from_episode_config
+from serpar.diagnosis.episode_family import EpisodeFamily, free_windows
+from serpar.diagnosis.insertion_friction import NOMINAL_MU
+from serpar.diagnosis.prior import PriorFamily
+from serpar.diagnosis.select import diagnose
+from serpar.errors import ConfigError
+from serpar.sim.arm import PANDA_COULOMB_FRICTION
+from serpar.sim.recording import read_recording
+from serpar.tasks.episode import run_episode
+from serpar.tasks.episode_config import EpisodeConfig
 
 pytestmark = pytest.mark.xdist_group("calibrated")
 

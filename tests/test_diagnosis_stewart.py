@@ -1,6 +1,6 @@
 """The Stewart domain of ``serpar diagnose``: twins with one concealed effect each, made by the
-MuJoCo platform at rest (tasks/twin_stewart.py), diagnosed blind from rest holds of commanded
-and measured legs and motion-capture poses (identify/diagnosis/stewart*.py)."""
+MuJoCo platform at rest (twins/stewart_twin.py), diagnosed blind from rest holds of commanded
+and measured legs and motion-capture poses (diagnosis/stewart*.py)."""
 
 from __future__ import annotations
 
@@ -11,24 +11,22 @@ import numpy as np
 import pyarrow as pa
 import pytest
 from diagnosis_support import RMS_TARGET, assert_jacobian_matches_differences, run_trials
-
-from controllers.stewart_kinematics import forward_kinematics, inverse_kinematics
-from identify.diagnosis.choose import family_from_recording
-from identify.diagnosis.family import Family
-from identify.diagnosis.fit import fit_model
-from identify.diagnosis.select import earns
-from identify.diagnosis.stewart import AXES, StewartFamily
-from identify.diagnosis.stewart_effects import geometry_flat_index
-from identify.diagnosis.stewart_model import nominal_load, static_leg_forces
-from identify.errors import IdentificationError
-from serpar.cli import main
-from sim.errors import ConfigError
-from sim.recording import Recording
-from sim.stewart import StewartConfig, built_geometry
-from tasks.stewart_campaign import random_poses
-from tasks.stewart_params import load_stewart_parameters
-from tasks.twin_stewart import EFFECTS, PAYLOAD_COM_M, PAYLOAD_KG, make_twin
-from tasks.twin_stewart_sim import PlatformPlant, Reality
+from serpar.calibration.stewart_campaign import random_poses
+from serpar.calibration.stewart_params import load_stewart_parameters
+from serpar.cli.entry import main
+from serpar.diagnosis.choose import family_from_recording
+from serpar.diagnosis.family import Family
+from serpar.diagnosis.fit import fit_model
+from serpar.diagnosis.select import earns
+from serpar.diagnosis.stewart_effects import geometry_flat_index
+from serpar.diagnosis.stewart_family import AXES, StewartFamily
+from serpar.errors import ConfigError, IdentificationError
+from serpar.kinematics.stewart_kinematics import forward_kinematics, inverse_kinematics
+from serpar.sim.plants.stewart_platform import PlatformPlant, Reality
+from serpar.sim.recording import Recording
+from serpar.sim.stewart import StewartConfig, built_geometry
+from serpar.sim.stewart_statics import nominal_load, static_leg_forces
+from serpar.twins.stewart_twin import EFFECTS, PAYLOAD_COM_M, PAYLOAD_KG, make_twin
 
 pytestmark = pytest.mark.xdist_group("stewart_twins")  # one worker builds the twins
 
@@ -299,7 +297,7 @@ def test_twin_then_diagnose_writes_stewart_parameters(tmp_path, capsys) -> None:
 
 
 def test_blind_bench_draws_stewart_trials() -> None:
-    from tasks.blind_bench import plan
+    from serpar.checks.blind_bench import plan
 
     trials = plan(12, 0, ("stewart",))
     assert {d for d, *_ in trials} == {"stewart"}
@@ -308,6 +306,6 @@ def test_blind_bench_draws_stewart_trials() -> None:
 
 def test_geometry_parameter_names_round_trip() -> None:
     for flat in range(42):
-        from identify.diagnosis.stewart_effects import geometry_name
+        from serpar.diagnosis.stewart_effects import geometry_name
 
         assert geometry_flat_index(geometry_name(flat)) == flat

@@ -1,7 +1,7 @@
 """The moving-Stewart domain of ``serpar diagnose``: twins of MuJoCo's platform driven along a
-continuous trajectory with one concealed latency each (tasks/twin_stewart_motion.py),
+continuous trajectory with one concealed latency each (twins/stewart_motion_twin.py),
 diagnosed blind from every sample of commanded and measured legs and motion-capture poses
-(identify/diagnosis/stewart_motion*.py)."""
+(diagnosis/stewart_motion*.py)."""
 
 from __future__ import annotations
 
@@ -12,16 +12,14 @@ import numpy as np
 import pyarrow as pa
 import pytest
 from diagnosis_support import RMS_TARGET, assert_jacobian_matches_differences, run_trials
-
-from identify.diagnosis.choose import family_from_recording
-from identify.diagnosis.family import Family
-from identify.diagnosis.fit import fit_model
-from identify.diagnosis.stewart_motion import AXES, StewartMotionFamily
-from identify.diagnosis.stewart_motion_effects import moving_share
-from identify.errors import IdentificationError
-from sim.errors import ConfigError
-from sim.recording import Recording
-from tasks.twin_stewart_motion import EFFECTS, make_twin
+from serpar.diagnosis.choose import family_from_recording
+from serpar.diagnosis.family import Family
+from serpar.diagnosis.fit import fit_model
+from serpar.diagnosis.stewart_motion_effects import moving_share
+from serpar.diagnosis.stewart_motion_family import AXES, StewartMotionFamily
+from serpar.errors import ConfigError, IdentificationError
+from serpar.sim.recording import Recording
+from serpar.twins.stewart_motion_twin import EFFECTS, make_twin
 
 pytestmark = pytest.mark.xdist_group("stewart_motion_twins")
 
@@ -88,7 +86,7 @@ def test_concealment(results) -> None:
     r = fam.residual({}, rows).reshape(-1, 12)[:, :6]
     rms_train, rms_held = (float(np.sqrt(np.mean(r[x] ** 2))) for x in (train, held))
     assert rms_train < 1.2 < rms_held, (rms_train, rms_held)
-    from identify.diagnosis.stewart import family_from_recording as rest_family
+    from serpar.diagnosis.stewart_family import family_from_recording as rest_family
 
     with pytest.raises(IdentificationError, match="rest holds found"):
         rest_family(results["mocap_latency"][0])
@@ -180,7 +178,7 @@ def test_bad_input_is_one_line_naming_the_problem(results, change, message: str)
 
 
 def test_blind_bench_draws_stewart_motion_trials() -> None:
-    from tasks.blind_bench import plan
+    from serpar.checks.blind_bench import plan
 
     trials = plan(12, 0, ("stewart_motion",))
     assert {d for d, *_ in trials} == {"stewart_motion"}

@@ -10,12 +10,11 @@ import math
 
 import numpy as np
 import pytest
-
-from sim.errors import ConfigError
-from tasks.episode import run_episode
-from tasks.episode_config import EpisodeConfig
-from tasks.run_episodes import RunSummary, run_many, summarise
-from tasks.stewart_correction import rotation_between
+from serpar.controllers.plate_commander import rotation_between
+from serpar.errors import ConfigError
+from serpar.tasks.episode import run_episode
+from serpar.tasks.episode_config import EpisodeConfig
+from serpar.tasks.run_episodes import RunSummary, run_many, summarise
 
 pytestmark = pytest.mark.xdist_group("calibrated")
 
@@ -52,7 +51,7 @@ def test_phases_are_timed(one_hole):
 
 
 def test_one_bad_episode_does_not_end_the_run(monkeypatch):
-    import tasks.run_episodes as runner
+    import serpar.tasks.run_episodes as runner
 
     def boom(cfg, on_hole=None, label=None):
         if cfg.seed == 1:
@@ -86,8 +85,8 @@ def test_rotation_between_is_exact():
 
 
 def test_stewart_parameter_file_round_trips_and_bad_files_are_named(tmp_path):
-    from tasks.episode_config import table5_errors
-    from tasks.stewart_params import load_stewart_parameters, save_stewart_parameters
+    from serpar.calibration.stewart_params import load_stewart_parameters, save_stewart_parameters
+    from serpar.tasks.episode_config import table5_errors
 
     path = save_stewart_parameters(tmp_path / "p.json", table5_errors())
     assert np.array_equal(load_stewart_parameters(path), table5_errors())

@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from sim.config_io import load_yaml_config
-from sim.errors import ConfigError
-from tasks.episode_config import (
+from serpar.errors import ConfigError
+from serpar.sim.config_io import load_yaml_config
+from serpar.tasks.episode_config import (
     EpisodeConfig,
     HiddenStewartErrors,
     Outcome,

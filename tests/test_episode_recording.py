@@ -8,14 +8,13 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from sim.recording import check_channels, read_recording
-from sim.seat_lock import lock_seated
-from tasks.episode import _Snapshot, build_runtime
-from tasks.episode_config import EpisodeConfig
-from tasks.episode_recorder import CHANNELS, RRD_NAME, EpisodeRecorder
-from tasks.vision_scenes import seat_conductor
-from vision.imaging import Camera, ImagingConfig
+from serpar.checks.vision_scenes import seat_conductor
+from serpar.sim.recording import check_channels, read_recording
+from serpar.sim.seat_lock import lock_seated
+from serpar.tasks.episode import _Snapshot, build_runtime
+from serpar.tasks.episode_config import EpisodeConfig
+from serpar.tasks.episode_recorder import CHANNELS, RRD_NAME, EpisodeRecorder
+from serpar.vision.imaging import Camera, ImagingConfig
 
 STEP = 2 * np.pi / 2**20
 """Encoder resolution of the default arm sensors [rad]."""
@@ -121,7 +120,7 @@ def test_rrd_opens_in_the_rerun_sdk(recorded):
 
 
 def test_replay_errors_are_one_line(tmp_path, capsys, monkeypatch):
-    from serpar.cli import main
+    from serpar.cli.entry import main
 
     assert main(["replay", str(tmp_path / "missing.rrd")]) == 2
     assert capsys.readouterr().err.strip().endswith("missing.rrd: no such file")
@@ -138,8 +137,8 @@ def test_replay_errors_are_one_line(tmp_path, capsys, monkeypatch):
 
 
 def test_run_passes_the_record_folder_through(tmp_path, monkeypatch):
-    import tasks.run_episodes as runner
-    from serpar.cli import main
+    import serpar.tasks.run_episodes as runner
+    from serpar.cli.entry import main
 
     seen = []
 
@@ -162,17 +161,17 @@ def test_run_episode_writes_its_recording_even_when_it_fails(tmp_path, monkeypat
     leaves its recording (here the platform registration is made to fail)."""
     from types import SimpleNamespace
 
-    from sim.errors import SimError
-    from tasks.episode import run_episode
-    from tasks.episode_steps import HoleCycle
+    from serpar.errors import SerparError
+    from serpar.tasks.episode import run_episode
+    from serpar.tasks.episode_steps import HoleCycle
 
     def fail(self):
         self._enter("register")
-        raise SimError("injected")
+        raise SerparError("injected")
 
     monkeypatch.setattr(HoleCycle, "register_platform", fail)
     pair = SimpleNamespace(scaled=lambda size: pair)
-    with pytest.raises(SimError, match="injected"):
+    with pytest.raises(SerparError, match="injected"):
         run_episode(EpisodeConfig(camera_width=1024, stewart_calibration="none"), {"top": pair, "inspect": pair},
                     recording=tmp_path / "ep")
     back = read_recording(tmp_path / "ep")

@@ -15,10 +15,8 @@ import mujoco
 import numpy as np
 import pytest
 from scipy.linalg import expm
-
-from identify import poe
-from identify import seed001_robot as s1
-from identify.error_analysis import (
+from serpar.checks import tool_changer_robot as s1
+from serpar.checks.error_analysis import (
     ErrorAnalysisConfig,
     ErrorSample,
     arm_model,
@@ -30,10 +28,10 @@ from identify.error_analysis import (
     sensitivity,
     transmission_errors,
 )
-from identify.errors import IdentificationError
-from serpar import cmd_error_analysis
-from sim import arm
-from sim.errors import ConfigError, SimError
+from serpar.cli.entry import cmd_error_analysis
+from serpar.errors import ConfigError, IdentificationError, SerparError
+from serpar.kinematics import poe
+from serpar.sim import arm
 
 N = 20_000
 SE_STD = 4 / math.sqrt(2 * N)
@@ -292,11 +290,11 @@ def test_bad_error_tables_raise() -> None:
     model = arm_model("panda")
     with pytest.raises(IdentificationError, match="7 links and 7 joints"):
         sample_transmission(model, s1.table2_errors(), 3, np.random.default_rng(0))
-    assert issubclass(IdentificationError, SimError)
+    assert issubclass(IdentificationError, SerparError)
 
 
 def _parser() -> argparse.ArgumentParser:
-    from serpar.cli import _Parser  # the CLI's one-line-error parser class
+    from serpar.cli.entry import _Parser  # the CLI's one-line-error parser class
 
     parser = _Parser(prog="serpar")
     cmd_error_analysis.register(parser.add_subparsers(parser_class=_Parser))

@@ -3,15 +3,14 @@ sliding in the pads; an unstable integration is caught and named."""
 
 import numpy as np
 import pytest
-
-from sim import names
-from sim.errors import UnstableSimulation
-from sim.poses import GRASP_HEIGHT
-from sim.scene import SceneConfig, build_scene
-from tasks.arm_checks import controller_config
-from tasks.cell_runtime import CellRuntime
-from tasks.motions import move_tcp, tcp_pose
-from tasks.vision_inhand_scenes import true_in_hand
+from serpar.checks.vision_inhand_scenes import true_in_hand
+from serpar.controllers.arm_controller import controller_config
+from serpar.controllers.cell_runtime import CellRuntime
+from serpar.errors import UnstableSimulation
+from serpar.sim import names
+from serpar.sim.poses import GRASP_HEIGHT
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.tasks.motions import move_tcp, tcp_pose
 
 GRASP_ROT = np.array([[-1.0, 0, 0], [0, 1.0, 0], [0, 0, -1.0]])  # TCP z down, fingers close along y
 

@@ -5,10 +5,9 @@ import math
 import mujoco
 import numpy as np
 import pytest
-
-from sim.errors import ConfigError
-from sim.holes import BoreGeometry
-from sim.rig import RigConfig, build_rig
+from serpar.errors import ConfigError
+from serpar.sim.holes import BoreGeometry
+from serpar.sim.rig import RigConfig, build_rig
 
 
 def _free_travel(rig, theta: float) -> float:

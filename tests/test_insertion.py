@@ -4,16 +4,14 @@ from the simulator's truth."""
 
 import numpy as np
 import pytest
-
-from controllers.arm_controller import ControlLaw
-from sim import names
-from sim.errors import ConfigError
-from sim.poses import GRASP_HEIGHT, put_in_hand, solve_tcp_pose
-from sim.scene import SceneConfig, build_scene
-from tasks.arm_checks import controller_config
-from tasks.cell_runtime import CellRuntime
-from tasks.episode_config import Outcome
-from tasks.insertion import InsertionConfig, InsertionResult, insert
+from serpar.controllers.arm_controller import ControlLaw, controller_config
+from serpar.controllers.cell_runtime import CellRuntime
+from serpar.errors import ConfigError
+from serpar.sim import names
+from serpar.sim.poses import GRASP_HEIGHT, put_in_hand, solve_tcp_pose
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.tasks.episode_config import Outcome
+from serpar.tasks.insertion import InsertionConfig, InsertionResult, insert
 
 HOLE = 14
 

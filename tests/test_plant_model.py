@@ -10,18 +10,17 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
-
-from identify.diagnosis.model_file import read_model_file
-from identify.diagnosis.plant_model import KNOWN_EFFECTS, arm_plant_from_file
-from identify.mdh import forward, panda_chain
-from serpar.cli import main
-from sim import names
-from sim.arm import HOME_Q, JOINT_NAMES
-from sim.arm_plant import PAYLOAD_BODY
-from sim.config_io import load_yaml_config
-from sim.errors import ConfigError
-from sim.scene import Scene, SceneConfig, build_scene
-from tasks.episode_config import EpisodeConfig, scene_config
+from serpar.cli.entry import main
+from serpar.errors import ConfigError
+from serpar.kinematics.mdh import forward, panda_chain
+from serpar.sim import names
+from serpar.sim.arm import HOME_Q, JOINT_NAMES
+from serpar.sim.config_io import load_yaml_config
+from serpar.sim.model_file import read_model_file
+from serpar.sim.plants.arm_changes import PAYLOAD_BODY
+from serpar.sim.plants.from_model_file import KNOWN_EFFECTS, arm_plant_from_file
+from serpar.sim.scene import Scene, SceneConfig, build_scene
+from serpar.tasks.episode_config import EpisodeConfig, scene_config
 
 DATA = Path(__file__).resolve().parent / "data"
 PAYLOAD = DATA / "payload_twin.model.json"
@@ -207,8 +206,9 @@ def test_yaml_plant_model_key(tmp_path) -> None:
 def test_every_arm_twin_effect_has_a_plant_mapping_or_a_reason() -> None:
     """Every effect an arm or episode diagnosis can write: the arm twins' and the episode's
     insertion contact friction."""
-    from identify.diagnosis import insertion
-    from tasks import twin_arm_dynamics, twin_arm_static
+    from serpar.diagnosis import insertion_friction as insertion
+    from serpar.twins import arm_dynamics_twin as twin_arm_dynamics
+    from serpar.twins import arm_static_twin as twin_arm_static
 
     written = set(twin_arm_static.EFFECTS) | set(twin_arm_dynamics.EFFECTS) | {insertion.NAME}
     assert written == set(KNOWN_EFFECTS)
@@ -266,7 +266,7 @@ def test_diagnose_against_a_model_of_another_domain_is_a_clear_error(tmp_path, c
 def test_serpar_run_warns_what_the_plant_cannot_take(tmp_path, capsys) -> None:
     import argparse
 
-    from serpar.cmd_run import episode_config
+    from serpar.cli.cmd_run import episode_config
 
     cfg_file = tmp_path / "e.yaml"
     cfg_file.write_text(f"plant_model: {PANDA_1}\n")

@@ -3,10 +3,9 @@ follower that keeps a hole under a journal wandering sideways (all from the mode
 
 import numpy as np
 import pytest
-
-from sim.scene import SceneConfig, build_scene
-from tasks.episode_steps import HoleUnderJournal
-from tasks.stewart_correction import PlateCommander, transform
+from serpar.controllers.plate_commander import PlateCommander, transform
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.tasks.episode_steps import HoleUnderJournal
 
 AXIS = np.array([0.0, 0.0, -1.0])  # journal direction, body -> tip
 HOLE_IN_PLATE = np.array([0.02, -0.015, 0.0])

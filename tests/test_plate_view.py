@@ -6,13 +6,12 @@
 import mujoco
 import numpy as np
 import pytest
-
-from sim.scene import SceneConfig, build_scene
-from tasks.episode_steps import STATION_ENTRY, TOP
-from tasks.stewart_correction import transform
-from vision.camera import true_camera
-from vision.imaging import ImagingConfig
-from vision.layout import plate_in_view, plate_layout
+from serpar.controllers.plate_commander import transform
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.tasks.episode_steps import STATION_ENTRY, TOP
+from serpar.vision.camera import true_camera
+from serpar.vision.imaging import ImagingConfig
+from serpar.vision.layout import plate_in_view, plate_layout
 
 CFG = SceneConfig()
 

@@ -26,12 +26,9 @@ from arm_cal_support import (
     position_set,
     truth,
 )
-
-from identify import poe
-from identify.arm_calibration import calibrate, identifiability_of
-from identify.arm_identifiability import identifiability
-from identify.arm_measurements import PointSet, PoseSet, PositionSet
-from identify.arm_model import (
+from serpar.calibration.arm_calibration import calibrate, identifiability_of
+from serpar.calibration.arm_campaign import real_data_calibration, simulated_calibration
+from serpar.calibration.arm_error_models import (
     ArmModel,
     chain_forward,
     initial_parameters,
@@ -41,13 +38,15 @@ from identify.arm_model import (
     preference,
     residuals_and_jacobian,
 )
-from identify.errors import IdentificationError
-from identify.mdh import panda_chain
-from identify.panda_data import load_panda_folder
-from identify.poe_calibration import panda_poe_chain, poe_kinematics
-from serpar.cmd_calibrate_arm import cmd_calibrate_arm
-from tasks.arm_calibration_run import real_data_calibration, simulated_calibration
-from tasks.arm_truth import TruthConfig, run_campaign
+from serpar.calibration.arm_identifiability import identifiability
+from serpar.calibration.panda_data import load_panda_folder
+from serpar.calibration.poe_calibration import panda_poe_chain, poe_kinematics
+from serpar.cli.cmd_calibrate_arm import cmd_calibrate_arm
+from serpar.errors import IdentificationError
+from serpar.kinematics import poe
+from serpar.kinematics.mdh import panda_chain
+from serpar.sim.arm_measurements import PointSet, PoseSet, PositionSet
+from serpar.sim.plants.static_panda import TruthConfig, run_campaign
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "panda_1"
 
@@ -75,7 +74,7 @@ def test_poe_chain_is_the_mdh_arm_and_its_jacobian_matches_finite_differences():
     for j in range(7):
         fd = _fd_twist(lambda s, j=j: chain_forward(chain, x, q + s * np.eye(7)[j]))
         assert np.abs(fd - kin.joint_jacobian[:, :, j]).max() < 1e-8, f"joint {j + 1}"
-    # the closed-form SE(3) left Jacobian is the series of identify.poe.left_jacobian
+    # the closed-form SE(3) left Jacobian is the series of serpar.kinematics.poe.left_jacobian
     for v in np.random.default_rng(2).normal(size=(8, 6)) * [[1e-7], [1e-3], [0.1], [0.3],
                                                               [0.6], [1.0], [2.0], [3.0]]:
         assert np.abs(poe.se3_left_jacobian(v) - poe.left_jacobian(v)).max() < 1e-13

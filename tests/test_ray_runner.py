@@ -13,10 +13,9 @@ import sys
 import time
 
 import pytest
-
-from sim.errors import ConfigError
-from tasks.episode_config import EpisodeConfig
-from tasks.run_episodes import run_many, summarise
+from serpar.errors import ConfigError
+from serpar.tasks.episode_config import EpisodeConfig
+from serpar.tasks.run_episodes import run_many, summarise
 
 pytestmark = pytest.mark.xdist_group("ray")  # one local Ray instance at a time under -n auto
 
@@ -84,8 +83,8 @@ def test_real_run_one_goes_through_ray(ray_2cpu, tmp_path):
 
 
 def test_ray_choices_are_one_line_errors(monkeypatch):
-    from serpar.cli import main
-    from tasks.ray_runner import RAY_MISSING, require_ray
+    from serpar.cli.entry import main
+    from serpar.tasks.ray_runner import RAY_MISSING, require_ray
 
     with pytest.raises(ConfigError, match="choose one"):
         run_many([EpisodeConfig()], workers=2, ray_address="local")
@@ -100,7 +99,7 @@ def test_ray_choices_are_one_line_errors(monkeypatch):
 def test_an_unreachable_ray_address_fails_at_once_in_one_line():
     import socket
 
-    from tasks.ray_runner import check_reachable
+    from serpar.tasks.ray_runner import check_reachable
 
     with socket.socket() as s:  # a port nothing listens on: bound, never listening
         s.bind(("127.0.0.1", 0))

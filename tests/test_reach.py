@@ -2,9 +2,8 @@
 
 import numpy as np
 import pytest
-
-from sim.poses import solve_tcp_pose
-from sim.scene import SceneConfig, build_scene
+from serpar.sim.poses import solve_tcp_pose
+from serpar.sim.scene import SceneConfig, build_scene
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,7 @@ import json
 import numpy as np
 import pyarrow as pa
 import pytest
-
-from sim.recording import (
+from serpar.sim.recording import (
     PhaseSegment,
     Recording,
     RecordingError,

@@ -3,11 +3,10 @@
 import mujoco
 import numpy as np
 import pytest
-
-from sim import names
-from sim.errors import ConfigError
-from sim.info import scene_info
-from sim.scene import SceneConfig, build_scene
+from serpar.errors import ConfigError
+from serpar.sim import names
+from serpar.sim.info import scene_info
+from serpar.sim.scene import SceneConfig, build_scene
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""A scored, seated part becomes part of the plate (sim.seat_lock): it keeps the pose it seated
+"""A scored, seated part becomes part of the plate (serpar.sim.seat_lock): it keeps the pose it seated
 at, the rest of the state carries over the recompile, it stops touching the plate, and the
 hand and loose parts still collide with it."""
 
@@ -7,14 +7,13 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
-
-from controllers.stewart_servo import StewartServo
-from sim import names
-from sim.errors import SimError
-from sim.scene import SceneConfig, build_scene
-from sim.seat_lock import PLATE_BODY, is_locked, lock_seated
-from sim.stewart import built_geometry
-from tasks.vision_scenes import seat_conductor
+from serpar.checks.vision_scenes import seat_conductor
+from serpar.controllers.stewart_servo import StewartServo
+from serpar.errors import SerparError
+from serpar.sim import names
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.sim.seat_lock import PLATE_BODY, is_locked, lock_seated
+from serpar.sim.stewart import built_geometry
 
 
 def _run(scene, seconds: float) -> None:
@@ -101,8 +100,8 @@ def test_a_locked_part_still_meets_a_loose_part():
 
 def test_locking_twice_or_an_unknown_part_is_named():
     scene = build_scene(SceneConfig(n_conductors=1))
-    with pytest.raises(SimError, match="conductor 5 out of range"):
+    with pytest.raises(SerparError, match="conductor 5 out of range"):
         lock_seated(scene, 5)
     lock_seated(scene, 0)
-    with pytest.raises(SimError, match="already locked"):
+    with pytest.raises(SerparError, match="already locked"):
         lock_seated(scene, 0)

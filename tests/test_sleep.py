@@ -7,13 +7,12 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
-
-from controllers.stewart_servo import StewartServo
-from sim import names
-from sim.physics import PhysicsConfig
-from sim.scene import SceneConfig, build_scene
-from sim.stewart import built_geometry
-from tasks.vision_scenes import seat_conductor
+from serpar.checks.vision_scenes import seat_conductor
+from serpar.controllers.stewart_servo import StewartServo
+from serpar.sim import names
+from serpar.sim.physics import PhysicsConfig
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.sim.stewart import built_geometry
 
 
 @pytest.fixture()

@@ -5,10 +5,9 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
-
-from sim.errors import ConfigError
-from sim.physics import PhysicsConfig, wake_tree_of
-from sim.stewart import (
+from serpar.errors import ConfigError
+from serpar.sim.physics import PhysicsConfig, wake_tree_of
+from serpar.sim.stewart import (
     N_LEGS,
     StewartConfig,
     build_stewart_spec,

@@ -7,14 +7,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from identify.errors import IdentificationError
-from identify.stewart_poses import optimal_poses, reachable, smallest_singular_value, table3_poses
-from identify.stewart_solvers import SwarmConfig
-from sim.errors import ConfigError
-from sim.stewart import StewartConfig
-from tasks.stewart_calibration import SEED000_BOX, StewartCalibrationConfig, run_calibration
-from tasks.stewart_campaign import MocapNoise, random_poses
+from serpar.calibration.stewart_calibration import (
+    SEED000_BOX,
+    StewartCalibrationConfig,
+    run_calibration,
+)
+from serpar.calibration.stewart_campaign import MocapNoise, random_poses
+from serpar.calibration.stewart_poses import (
+    optimal_poses,
+    reachable,
+    smallest_singular_value,
+    table3_poses,
+)
+from serpar.calibration.stewart_solvers import SwarmConfig
+from serpar.errors import ConfigError, IdentificationError
+from serpar.sim.stewart import StewartConfig
 
 GEOMETRY = StewartConfig().geometry()
 SMALL_SWARM = SwarmConfig(particles=60, iterations=100)
@@ -75,8 +82,8 @@ def test_bad_calibration_config_names_the_choices(kwargs, needle):
 
 
 def test_cli_writes_parameters_the_episode_can_use(tmp_path, capsys):
-    from serpar.cli import main
-    from tasks.stewart_params import load_stewart_parameters
+    from serpar.calibration.stewart_params import load_stewart_parameters
+    from serpar.cli.entry import main
 
     out = tmp_path / "p.json"
     assert main(["calibrate", "stewart", "--source", "kinematic", "--solver", "lm", "--noise", "0", "0",

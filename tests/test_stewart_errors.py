@@ -4,14 +4,13 @@ kinematics say, not where its nominal model was commanded to."""
 import mujoco
 import numpy as np
 import pytest
-
-from controllers.stewart_kinematics import forward_kinematics
-from controllers.stewart_servo import StewartServo, platform_pose
-from sim import names
-from sim.errors import ConfigError
-from sim.scene import SceneConfig, build_scene
-from sim.stewart import StewartConfig, built_geometry, initial_pose, loop_violation
-from tasks.episode_config import table5_errors
+from serpar.controllers.stewart_servo import StewartServo, platform_pose
+from serpar.errors import ConfigError
+from serpar.kinematics.stewart_kinematics import forward_kinematics
+from serpar.kinematics.stewart_table import table5_errors
+from serpar.sim import names
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.sim.stewart import StewartConfig, built_geometry, initial_pose, loop_violation
 
 
 @pytest.fixture(scope="module")

@@ -4,19 +4,22 @@ simulated motion-capture campaign whose identified model cuts the platform's mov
 
 import numpy as np
 import pytest
-
-from controllers.rotations import so3_exp
-from controllers.stewart_kinematics import StewartGeometry, forward_kinematics, inverse_kinematics
-from identify.errors import IdentificationError
-from identify.stewart_identification import (
+from serpar.calibration.stewart_campaign import MocapNoise, measure, random_poses
+from serpar.calibration.stewart_identification import (
     StewartMeasurements,
     identification_jacobian,
     identify_lm,
     leg_residuals,
 )
-from sim.stewart import StewartConfig, built_geometry
-from tasks.episode_config import EpisodeConfig, scene_config, table5_errors
-from tasks.stewart_campaign import MocapNoise, measure, random_poses
+from serpar.errors import IdentificationError
+from serpar.kinematics.rotations import so3_exp
+from serpar.kinematics.stewart_kinematics import (
+    StewartGeometry,
+    forward_kinematics,
+    inverse_kinematics,
+)
+from serpar.sim.stewart import StewartConfig, built_geometry
+from serpar.tasks.episode_config import EpisodeConfig, scene_config, table5_errors
 
 NOMINAL = StewartConfig().geometry()
 TRUE = table5_errors()

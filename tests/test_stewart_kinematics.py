@@ -1,4 +1,4 @@
-"""Stewart kinematics (controllers.stewart_kinematics): IK/FK, Jacobian, hinge angles, limits."""
+"""Stewart kinematics (serpar.kinematics.stewart_kinematics): IK/FK, Jacobian, hinge angles, limits."""
 
 from __future__ import annotations
 
@@ -6,9 +6,10 @@ import mujoco
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-
-from controllers.rotations import euler_to_rot, quat_to_rot, rotation_angle, so3_exp
-from controllers.stewart_kinematics import (
+from serpar.checks.stewart_checks import ik_fk_round_trip, valid_poses
+from serpar.errors import ConfigError, LimitError
+from serpar.kinematics.rotations import euler_to_rot, quat_to_rot, rotation_angle, so3_exp
+from serpar.kinematics.stewart_kinematics import (
     StewartGeometry,
     check_pose,
     forward_kinematics,
@@ -18,9 +19,7 @@ from controllers.stewart_kinematics import (
     require_pose,
     singularity_measure,
 )
-from sim.errors import ConfigError, LimitError
-from sim.stewart import StewartConfig, load_joint_table, stewart_geometry, stroke_for_pose
-from tasks.stewart_checks import ik_fk_round_trip, valid_poses
+from serpar.sim.stewart import StewartConfig, load_joint_table, stewart_geometry, stroke_for_pose
 
 GEOM = stewart_geometry()
 HOME = np.array(GEOM.home_pos)

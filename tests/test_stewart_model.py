@@ -7,12 +7,11 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
-from sim.errors import ConfigError
-from tasks import stewart_model
-from tasks.episode_config import EpisodeConfig, HiddenStewartErrors
-from tasks.stewart_model import believed_errors, prepare_models
-from tasks.stewart_params import save_stewart_parameters
+from serpar.calibration.stewart_params import save_stewart_parameters
+from serpar.errors import ConfigError
+from serpar.tasks import platform_model as stewart_model
+from serpar.tasks.episode_config import EpisodeConfig, HiddenStewartErrors
+from serpar.tasks.platform_model import believed_errors, prepare_models
 
 IDENTIFIED = np.full((6, 7), 1e-5)
 

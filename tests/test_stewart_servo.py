@@ -1,20 +1,19 @@
-"""Stewart leg-servo pose commands (controllers.stewart_servo) in the standalone model and cell."""
+"""Stewart leg-servo pose commands (serpar.controllers.stewart_servo) in the standalone model and cell."""
 
 from __future__ import annotations
 
 import mujoco
 import numpy as np
 import pytest
-
-from controllers.rotations import euler_to_rot
-from controllers.stewart_kinematics import cardan_angles_deg, inverse_kinematics
-from controllers.stewart_servo import StewartServo, platform_pose
-from sim import names
-from sim.errors import ConfigError, LimitError
-from sim.physics import PhysicsConfig
-from sim.scene import SceneConfig, build_scene
-from sim.stewart import StewartConfig, build_stewart_spec
-from tasks.stewart_checks import commanded_vs_simulated
+from serpar.checks.stewart_checks import commanded_vs_simulated
+from serpar.controllers.stewart_servo import StewartServo, platform_pose
+from serpar.errors import ConfigError, LimitError
+from serpar.kinematics.rotations import euler_to_rot
+from serpar.kinematics.stewart_kinematics import cardan_angles_deg, inverse_kinematics
+from serpar.sim import names
+from serpar.sim.physics import PhysicsConfig
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.sim.stewart import StewartConfig, build_stewart_spec
 
 CFG = StewartConfig()
 GEOM = CFG.geometry()

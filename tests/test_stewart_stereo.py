@@ -1,4 +1,4 @@
-"""The stereo cameras as the Stewart calibration's pose source (tasks/stewart_stereo.py, issue 6).
+"""The stereo cameras as the Stewart calibration's pose source (calibration/stewart_stereo.py, issue 6).
 
 One campaign in the MuJoCo cell (seed 000 Table 5's hidden errors, 10 poses chosen in the top
 pair's view for conditioning, 1024 px frames with sensor noise and lighting variation, the
@@ -15,18 +15,15 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from controllers.stewart_kinematics import forward_kinematics, inverse_kinematics
-from identify.stewart_identification import identify_lm
-from identify.stewart_poses import optimal_poses, predicted_error_rms
-from sim.errors import ConfigError
-from sim.scene import SceneConfig
-from sim.stewart import StewartConfig, built_geometry, home_strokes
-from tasks.episode_config import table5_errors
-from tasks.stewart_calibration import StewartCalibrationConfig, measured_noise, pose_errors
-from tasks.stewart_campaign import random_poses
-from tasks.stewart_correction import inverse, transform
-from tasks.stewart_stereo import (
+from serpar.calibration.stewart_calibration import (
+    StewartCalibrationConfig,
+    measured_noise,
+    pose_errors,
+)
+from serpar.calibration.stewart_campaign import random_poses
+from serpar.calibration.stewart_identification import identify_lm
+from serpar.calibration.stewart_poses import optimal_poses, predicted_error_rms
+from serpar.calibration.stewart_stereo import (
     StereoConfig,
     planning_view,
     regauge,
@@ -34,6 +31,12 @@ from tasks.stewart_stereo import (
     top_pair,
     visible_random_poses,
 )
+from serpar.controllers.plate_commander import inverse, transform
+from serpar.errors import ConfigError
+from serpar.kinematics.stewart_kinematics import forward_kinematics, inverse_kinematics
+from serpar.kinematics.stewart_table import table5_errors
+from serpar.sim.scene import SceneConfig
+from serpar.sim.stewart import StewartConfig, built_geometry, home_strokes
 
 pytestmark = pytest.mark.xdist_group("calibrated")
 STEREO = StereoConfig(width=1024)

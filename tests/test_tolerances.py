@@ -1,8 +1,7 @@
 import numpy as np
 import pytest
-
-from sim.errors import ConfigError
-from sim.tolerances import HOLE_H7, JOURNAL_H6, draw_diameters
+from serpar.errors import ConfigError
+from serpar.sim.tolerances import HOLE_H7, JOURNAL_H6, draw_diameters
 
 
 def test_draws_stay_in_band_and_span_the_fit():

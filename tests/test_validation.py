@@ -1,10 +1,9 @@
 """The five physical validation checks of the foundation issue, asserted at their limits."""
 
 import pytest
-
-from sim.errors import UnknownNameError
-from sim.physics import PhysicsConfig
-from sim.validation import (
+from serpar.errors import UnknownNameError
+from serpar.sim.physics import PhysicsConfig
+from serpar.sim.validation import (
     CHECKS,
     check_aligned_insertion,
     check_lateral_penetration,

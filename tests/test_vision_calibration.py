@@ -8,17 +8,16 @@ import cv2
 import mujoco
 import numpy as np
 import pytest
-
-from sim.calibration_board import INSPECT_BOARD, TOP_BOARD
-from sim.cameras import INSPECT_PAIR
-from sim.poses import solve_tcp_pose
-from sim.scene import SceneConfig, build_scene
-from tasks.calibration_views import INSPECT_VOLUME, board_poses
-from vision.calibration import Observation, calibrate_pair
-from vision.camera import true_camera
-from vision.checkerboard import find_corners
-from vision.errors import CalibrationError, ImageError, TargetNotFound
-from vision.imaging import Camera, ImagingConfig
+from serpar.calibration.camera_views import INSPECT_VOLUME, board_poses
+from serpar.sim.calibration_board import INSPECT_BOARD, TOP_BOARD
+from serpar.sim.cameras import INSPECT_PAIR
+from serpar.sim.poses import solve_tcp_pose
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.vision.camera import true_camera
+from serpar.vision.checkerboard import find_corners
+from serpar.vision.errors import CalibrationError, ImageError, TargetNotFound
+from serpar.vision.imaging import Camera, ImagingConfig
+from serpar.vision.stereo_calibration import Observation, calibrate_pair
 
 pytestmark = pytest.mark.xdist_group("calibrated")
 

@@ -9,25 +9,24 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from sim.scene import SceneConfig, build_scene
-from tasks.vision_inhand_scenes import (
+from serpar.checks.vision_inhand_scenes import (
     measured_tcp,
     pose_inspect_with_error,
     random_grasp_error,
     true_in_hand,
 )
-from tasks.vision_scenes import (
+from serpar.checks.vision_scenes import (
     hole_errors,
     make_scene,
     random_offset,
     tray_match,
 )
-from vision.imaging import Camera, ImagingConfig
-from vision.inhand import inspect_in_hand
-from vision.layout import plate_layout, tray_region
-from vision.plate import locate_holes
-from vision.tray import locate_conductors
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.vision.imaging import Camera, ImagingConfig
+from serpar.vision.inhand import inspect_in_hand
+from serpar.vision.layout import plate_layout, tray_region
+from serpar.vision.plate import locate_holes
+from serpar.vision.tray_conductors import locate_conductors
 
 pytestmark = pytest.mark.xdist_group("calibrated")
 INSPECT = ("inspect_left", "inspect_right")

@@ -10,11 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-import vision.inhand
-from sim.scene import SceneConfig, build_scene
-from sim.tolerances import BODY_H6, JOURNAL_H6
-from tasks.vision_inhand_scenes import (
+import serpar.vision.inhand
+from serpar.checks.vision_inhand_scenes import (
     GraspError,
     empty_hand,
     measured_tcp,
@@ -23,10 +20,12 @@ from tasks.vision_inhand_scenes import (
     true_in_hand,
     true_pair,
 )
-from vision.errors import ConductorNotInView, ImageError
-from vision.imaging import Camera, ImagingConfig
-from vision.inhand import InHandMeasurement, inspect_in_hand
-from vision.inhand_overlay import draw_in_hand
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.sim.tolerances import BODY_H6, JOURNAL_H6
+from serpar.vision.errors import ConductorNotInView, ImageError
+from serpar.vision.imaging import Camera, ImagingConfig
+from serpar.vision.inhand import InHandMeasurement, inspect_in_hand
+from serpar.vision.inhand_overlay import draw_in_hand
 
 CAMERAS = ("inspect_left", "inspect_right")
 N_POSES = 5
@@ -129,5 +128,5 @@ def test_overlay_draws_on_a_copy(full_res):
 def test_vision_code_reads_no_simulator_state():
     for module in ("inhand.py", "inhand_edges.py", "inhand_overlay.py", "plate.py", "plate_detect.py",
                    "tray.py", "layout.py", "overlay.py", "calibration.py", "checkerboard.py"):
-        source = (Path(vision.inhand.__file__).parent / module).read_text()
+        source = (Path(serpar.vision.inhand.__file__).parent / module).read_text()
         assert "mujoco" not in source and "MjData" not in source

@@ -1,7 +1,7 @@
 """Steps 1 and 2 from pixels: the hole grid on the Stewart-carried baseplate and the
 conductors standing in the tray, measured with the simulator's true cameras on noisy renders
 (ImagingConfig() defaults: read + shot noise, lighting varied per shot). Ground truth comes
-only from the scene's sites (tasks.vision_scenes); the vision code never sees it.
+only from the scene's sites (serpar.checks.vision_scenes); the vision code never sees it.
 
 Two platform poses (seeds not used while the detectors were developed), five conductors
 seated in each. Bounds are what was measured on these scenes, with margin (numbers in the
@@ -13,15 +13,20 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 import pytest
-
-from sim.scene import Scene, SceneConfig
-from tasks.vision_scenes import make_scene, random_offset, score_plate, score_tray, truth_holes
-from vision.camera import StereoPair, true_camera
-from vision.errors import ConductorNotInView, HoleNotVisible, ImageError, PlateNotFound
-from vision.imaging import Camera, ImagingConfig
-from vision.layout import plate_layout, tray_pockets, tray_region
-from vision.plate import locate_holes
-from vision.tray import locate_conductors
+from serpar.checks.vision_scenes import (
+    make_scene,
+    random_offset,
+    score_plate,
+    score_tray,
+    truth_holes,
+)
+from serpar.sim.scene import Scene, SceneConfig
+from serpar.vision.camera import StereoPair, true_camera
+from serpar.vision.errors import ConductorNotInView, HoleNotVisible, ImageError, PlateNotFound
+from serpar.vision.imaging import Camera, ImagingConfig
+from serpar.vision.layout import plate_layout, tray_pockets, tray_region
+from serpar.vision.plate import locate_holes
+from serpar.vision.tray_conductors import locate_conductors
 
 CFG = SceneConfig()
 SEEDS = (101, 202)
@@ -147,7 +152,7 @@ def test_empty_view_raises_conductor_not_in_view(shots):
 
 
 def _grid_points(extra: np.ndarray) -> np.ndarray:
-    from sim.baseplate import BaseplateConfig
+    from serpar.sim.baseplate import BaseplateConfig
 
     pitch = BaseplateConfig().pitch
     i, j = np.meshgrid(np.arange(6), np.arange(6), indexing="xy")
@@ -158,8 +163,8 @@ def _grid_points(extra: np.ndarray) -> np.ndarray:
 def test_a_stray_match_off_the_grid_corner_is_dropped_not_a_new_row():
     """Seen in an episode (seed 0, cycle 3, calibrated): one false match on the plate plane
     1.2 pitches beyond a corner widened the grid to 7 x 7 and the cycle ended vision_miss."""
-    from sim.baseplate import BaseplateConfig
-    from vision.plate_grid import assign_grid
+    from serpar.sim.baseplate import BaseplateConfig
+    from serpar.vision.plate_grid import assign_grid
 
     points = _grid_points(np.array([[6.2, -0.9, 0.0]]))
     k = assign_grid(points, BaseplateConfig(), np.eye(3))
@@ -167,8 +172,8 @@ def test_a_stray_match_off_the_grid_corner_is_dropped_not_a_new_row():
 
 
 def test_a_real_extra_row_still_fails():
-    from sim.baseplate import BaseplateConfig
-    from vision.plate_grid import assign_grid
+    from serpar.sim.baseplate import BaseplateConfig
+    from serpar.vision.plate_grid import assign_grid
 
     row = np.c_[np.arange(6), np.full(6, 6.0), np.zeros(6)]
     with pytest.raises(PlateNotFound, match="7"):

@@ -7,14 +7,13 @@ import json
 
 import numpy as np
 import pytest
-
-from controllers.stewart_kinematics import LIMIT_NAMES, limit_violations
-from serpar.cmd_workspace import register
-from sim.errors import ConfigError
-from sim.stewart import stewart_geometry
-from sim.stewart_table import table_geometry
-from tasks.workspace import l_min_scan, workspace_monte_carlo
-from tasks.workspace_plot import plot_workspace
+from serpar.checks.workspace import l_min_scan, workspace_monte_carlo
+from serpar.checks.workspace_plot import plot_workspace
+from serpar.cli.cmd_workspace import register
+from serpar.errors import ConfigError
+from serpar.kinematics.stewart_kinematics import LIMIT_NAMES, limit_violations
+from serpar.kinematics.stewart_table import table_geometry
+from serpar.sim.stewart import stewart_geometry
 
 GEOM = stewart_geometry()
 

@@ -13,8 +13,7 @@ import cv2
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
-
-from vision.errors import ImageError
+from serpar.vision.errors import ImageError
 
 _MJ_TO_CV = np.diag([1.0, -1.0, -1.0])
 """MuJoCo cameras look along -z with y up; OpenCV cameras look along +z with y down."""

@@ -5,9 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-
-from sim.calibration_board import CheckerboardConfig
-from vision.errors import TargetNotFound
+from serpar.sim.calibration_board import CheckerboardConfig
+from serpar.vision.errors import TargetNotFound
 
 
 def _grey(image: np.ndarray) -> np.ndarray:

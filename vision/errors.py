@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from sim.errors import SimError
+from serpar.errors import SerparError
 
 
-class VisionError(SimError):
+class VisionError(SerparError):
     """Base class for every error raised by :mod:`vision`."""
 
 

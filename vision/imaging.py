@@ -14,10 +14,9 @@ from dataclasses import dataclass
 import cv2
 import mujoco
 import numpy as np
-
-from sim.cameras import SENSOR_PIXELS
-from sim.errors import ConfigError
-from sim.render import CameraRenderer
+from serpar.errors import ConfigError
+from serpar.sim.cameras import SENSOR_PIXELS
+from serpar.sim.render import CameraRenderer
 
 REDUCED_WIDTH = 1024
 """The reduced readout (2x2 binning of the 2048x1536 sensor)."""

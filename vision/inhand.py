@@ -21,11 +21,10 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
-
-from sim.conductor import ConductorConfig
-from sim.tolerances import BODY_H6, JOURNAL_H6
-from vision.camera import CameraModel, StereoPair
-from vision.inhand_edges import (
+from serpar.sim.conductor import ConductorConfig
+from serpar.sim.tolerances import BODY_H6, JOURNAL_H6
+from serpar.vision.camera import CameraModel, StereoPair
+from serpar.vision.inhand_edges import (
     NOMINAL_CONDUCTOR,
     CameraEdges,
     InHandConfig,

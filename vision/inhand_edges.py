@@ -1,6 +1,6 @@
 """Step-4 edge finding: sub-pixel silhouette edges of the held conductor in one in-hand image
 (body against the backlight and the pads, journal against the backlight, the tip's lower
-end). :mod:`vision.inhand` fits the axis to what this finds, over both cameras."""
+end). :mod:`serpar.vision.inhand` fits the axis to what this finds, over both cameras."""
 
 from __future__ import annotations
 
@@ -9,11 +9,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-
-from sim.conductor import ConductorConfig
-from sim.tolerances import BODY_H6, JOURNAL_H6
-from vision.camera import CameraModel
-from vision.errors import ConductorNotInView, VisionError
+from serpar.sim.conductor import ConductorConfig
+from serpar.sim.tolerances import BODY_H6, JOURNAL_H6
+from serpar.vision.camera import CameraModel
+from serpar.vision.errors import ConductorNotInView, VisionError
 
 Vec = NDArray[np.float64]
 BODY, JOURNAL = 0, 1

@@ -5,9 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-
-from vision.camera import CameraModel
-from vision.inhand import InHandMeasurement
+from serpar.vision.camera import CameraModel
+from serpar.vision.inhand import InHandMeasurement
 
 EDGE_RGB = (0, 200, 0)
 REJECTED_RGB = (255, 150, 0)

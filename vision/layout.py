@@ -7,10 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-
-from sim.baseplate import BaseplateConfig
-from sim.scene import SceneConfig
-from vision.camera import CameraModel
+from serpar.sim.baseplate import BaseplateConfig
+from serpar.sim.scene import SceneConfig
+from serpar.vision.camera import CameraModel
 
 Vec = NDArray[np.float64]
 NOMINAL_CELL = SceneConfig()
@@ -62,7 +61,7 @@ def tray_pockets(cfg: SceneConfig = NOMINAL_CELL) -> Vec:
 @dataclass(frozen=True)
 class PlateLayout:
     """Where the plate is nominally (cell layout, not a measurement): the plate frame of
-    :mod:`sim.baseplate` (bottom-face centre, z up) at the Stewart home pose, and how far the
+    :mod:`serpar.sim.baseplate` (bottom-face centre, z up) at the Stewart home pose, and how far the
     platform may carry it from there."""
 
     origin: tuple[float, float, float]
@@ -89,7 +88,7 @@ def plate_layout(cfg: SceneConfig = NOMINAL_CELL, travel: float = 0.015) -> Plat
 
 def plate_in_view(layout: PlateLayout, plate: BaseplateConfig, base_T_plate: Vec, holes_in_plate: Vec,
                   cameras: tuple[CameraModel, ...], above: float, margin: float = 0.02) -> bool:
-    """Whether :func:`vision.plate.locate_holes` can see every hole of the plate at
+    """Whether :func:`serpar.vision.plate.locate_holes` can see every hole of the plate at
     `base_T_plate` (4x4, plate frame in the base frame): each hole entry (`holes_in_plate`,
     (N, 3) in the plate frame), and the top of a part seated in it (`above` higher), inside the
     layout's search regions and inside every camera's image by `margin` of the image width.

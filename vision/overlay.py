@@ -12,11 +12,10 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-
-from sim.baseplate import BaseplateConfig
-from vision.camera import CameraModel
-from vision.plate import NOMINAL_PLATE, PlateMeasurement
-from vision.tray import BODY_DIAMETER, ConductorSighting
+from serpar.sim.baseplate import BaseplateConfig
+from serpar.vision.camera import CameraModel
+from serpar.vision.plate import NOMINAL_PLATE, PlateMeasurement
+from serpar.vision.tray_conductors import BODY_DIAMETER, ConductorSighting
 
 STATUS_RGB: dict[str, tuple[int, int, int]] = {
     "empty": (40, 200, 60),

@@ -27,16 +27,15 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
-
-from sim.baseplate import BaseplateConfig
-from sim.conductor import ConductorConfig
-from sim.scene import SceneConfig
-from vision.camera import StereoPair
-from vision.errors import HoleNotVisible, PlateNotFound
-from vision.layout import BoxRegion, PlateLayout, plate_layout
-from vision.plate_detect import PlateVisionConfig, find_dark_discs, measure_edge
-from vision.plate_grid import assign_grid, on_plane
-from vision.tray import (
+from serpar.sim.baseplate import BaseplateConfig
+from serpar.sim.conductor import ConductorConfig
+from serpar.sim.scene import SceneConfig
+from serpar.vision.camera import StereoPair
+from serpar.vision.errors import HoleNotVisible, PlateNotFound
+from serpar.vision.layout import BoxRegion, PlateLayout, plate_layout
+from serpar.vision.plate_detect import PlateVisionConfig, find_dark_discs, measure_edge
+from serpar.vision.plate_grid import assign_grid, on_plane
+from serpar.vision.tray_conductors import (
     BODY_DIAMETER,
     expected_diameter_px,
     find_brass_tops,
@@ -78,7 +77,7 @@ class PlateMeasurement:
     rotation: Vec
     """Plate frame axes (columns) in the base frame."""
     origin: Vec
-    """Plate frame origin (bottom-face centre, as :mod:`sim.baseplate`) in the base frame [m]."""
+    """Plate frame origin (bottom-face centre, as :mod:`serpar.sim.baseplate`) in the base frame [m]."""
     holes: tuple[HoleResult, ...]
     rms_px: float
     """RMS reprojection error of the fit (holes, tops, edges) [px at the images' size]."""

@@ -1,5 +1,5 @@
 """Step-2 detectors: dark hole discs with sub-pixel centres, and the plate's straight top edges,
-in one image. :mod:`vision.plate` matches and fits what these find."""
+in one image. :mod:`serpar.vision.plate` matches and fits what these find."""
 
 from __future__ import annotations
 
@@ -8,9 +8,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-
-from vision.camera import CameraModel
-from vision.tray import BrassConfig, grey, soft_centroid
+from serpar.vision.camera import CameraModel
+from serpar.vision.tray_conductors import BrassConfig, grey, soft_centroid
 
 Vec = NDArray[np.float64]
 

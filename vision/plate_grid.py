@@ -5,9 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-
-from sim.baseplate import BaseplateConfig
-from vision.errors import PlateNotFound
+from serpar.sim.baseplate import BaseplateConfig
+from serpar.vision.errors import PlateNotFound
 
 Vec = NDArray[np.float64]
 

@@ -1,0 +1,3 @@
+from serpar.cli.entry import main
+
+raise SystemExit(main())

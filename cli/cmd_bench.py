@@ -1,0 +1,64 @@
+"""``serpar bench``: physics steps per second of the cell, bare and under the control loop."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from serpar.checks.bench import BenchConfig, run_bench
+from serpar.checks.bench_episode import episode_bench
+from serpar.cli.output import print_json, progress, table
+
+
+def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("bench", help="steps per second of the full cell: bare mj_step (the floor), with "
+                                     "and without sleeping, and serpar's control loop in free motion "
+                                     "and in contact, with its overhead over the floor")
+    p.add_argument("--seconds", type=float, default=0.2, help="simulated seconds per timing (default 0.2)")
+    p.add_argument("--repeats", type=int, default=3, help="timings per figure, best kept (default 3)")
+    p.add_argument("--episode", action="store_true",
+                   help="also time the assembly task: one hole cycle, the 36-hole episode (estimated "
+                        "from it) and 2 workers vs 1 (adds ~4 min)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_bench)
+    return p
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    cfg = BenchConfig(sim_seconds=args.seconds, repeats=args.repeats)
+    bar = progress(5 + 3 * args.episode, "bench", enabled=sys.stderr.isatty())
+
+    def tick(name: str) -> None:
+        bar.set_postfix_str(name)
+        bar.update(1)
+
+    report = run_bench(cfg, tick)
+    if args.episode:
+
+        report["episode"] = episode_bench(tick=tick)
+    bar.close()
+    if args.json:
+        print_json(report)
+        return 0
+    print(f"serpar bench  timestep {report['timestep_s'] * 1e3:g} ms, best of {cfg.repeats} x "
+          f"{cfg.sim_seconds:g} s simulated")
+    rows = [[f"bare mj_step: {name.replace('_', ' ')}", f"{r['steps_per_s']:,.0f}", f"{r['realtime_factor']:.2f}", ""]
+            for name, r in report["bare"].items()]
+    for phase in ("free_motion", "in_contact"):
+        r = report[phase]
+        label = phase.replace("_", " ")
+        rows.append([f"control loop, {label}", f"{r['loop']['steps_per_s']:,.0f}",
+                     f"{r['loop']['realtime_factor']:.2f}", f"{r['overhead']:.2f}x"])
+        rows.append(["  bare mj_step from the same state", f"{r['bare']['steps_per_s']:,.0f}",
+                     f"{r['bare']['realtime_factor']:.2f}", ""])
+    print(table(["", "steps/s", "x real time", "loop / bare"], rows))
+    if args.episode:
+        e = report["episode"]
+        c, w = e["hole_cycle"], e["two_episodes_of_one_hole"]
+        print(table(["assembly task", "wall s", "simulated s", "x real time"], [
+            ["one hole cycle (mean)", f"{c['wall_s']:.1f}", f"{c['sim_s']:.2f}", f"{c['realtime_factor']:.2f}"],
+            ["episode set-up (scene, settle, registration)", f"{e['episode_setup_wall_s']:.1f}", "", ""],
+            ["36-hole episode, estimated", f"{e['episode_36_holes_estimated_wall_s']:.0f}", "", ""],
+            ["2 one-hole episodes, 1 worker", f"{w['workers_1_s']:.1f}", "", ""],
+            ["2 one-hole episodes, 2 workers", f"{w['workers_2_s']:.1f}", "", f"speed-up {w['speedup']:.2f}x"]]))
+    return 0

@@ -1,0 +1,121 @@
+"""``serpar diagnose REC``: where the nominal model and a recording differ, which physics it
+left out, the fitted model, and the held-out improvement (serpar.diagnosis)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from serpar.cli.output import print_json, progress, table
+from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis
+from serpar.diagnosis.config_model import is_config_path, model_from_episode_config
+from serpar.diagnosis.prior import PriorFamily
+from serpar.diagnosis.report_html import write_report
+from serpar.diagnosis.select import diagnose
+from serpar.errors import ConfigError
+from serpar.sim.model_file import parse_model, read_model_file
+from serpar.sim.plants.from_model_file import KNOWN_EFFECTS, applied_parts, arm_plant_changes
+
+
+def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("diagnose", help="locate sim-vs-real differences, name and fit the "
+                                        "missing physics, score it on held-out data")
+    p.add_argument("recording", help="a recording folder (docs/recording.md) or a "
+                                     "panda_1-layout folder")
+    p.add_argument("--report", metavar="OUT.html",
+                   help="write an HTML report (plots embedded) and OUT.model.json beside it "
+                        "(Stewart geometry or encoder offsets: also OUT.stewart_params.json, "
+                        "for serpar run's stewart_calibration)")
+    p.add_argument("--model", metavar="M.model.json|CELL.yaml",
+                   help="diagnose against a previous diagnosis's model file, or against the "
+                        "cell an episode config (serpar run --config YAML) builds: its arm "
+                        "friction and plant model; their effects are fixed in the nominal "
+                        "prediction (default: the nominal arm); the written model is M's "
+                        "updated by what this recording shows")
+    p.add_argument("--seed", type=int, default=0, help="seed of the train/held-out split "
+                                                       "where the recording does not fix it")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_diagnose)
+    return p
+
+
+def print_diagnosis(diag, source: str) -> None:  # type: ignore[no-untyped-def]
+    print(f"serpar diagnose {source}: {diag.kind}, {diag.n_train_rows} training / "
+          f"{diag.n_heldout_rows} held-out rows, {diag.wall_s:.1f} s")
+    print("\nWHERE (nominal model, baseline fitted; residual / noise sigma):")
+    print(table(["channel", "split by", "label", "n", "RMS/sigma", "p", "beyond noise"],
+                [[r.channel, r.group, r.label, r.n, f"{r.rms_whitened:.3g}", f"{r.p_value:.2g}",
+                  "YES" if r.flagged else ""] for r in diag.locate_before]))
+    print("\nWHAT:")
+    if not diag.findings:
+        print(f"  {diag.verdict}")
+    for f in diag.findings:
+        print(f"  {f.rank}. {f.words()}")
+    print(f"\nheld-out RMS / noise: {diag.heldout_rms_before:.3g} before -> "
+          f"{diag.heldout_rms_after:.3g} after (noise floor 1, p = {diag.heldout_p_after:.2g}); "
+          f"{100 * diag.explained:.1f} % of the excess held-out residual explained")
+    print(f"verdict: {diag.verdict}")
+
+
+def plant_summary(model: dict) -> dict[str, list[str]] | None:  # type: ignore[type-arg]
+    """What `serpar run` (EpisodeConfig.plant_model) will apply of a written arm model, and
+    what it cannot; None for a model of another domain."""
+
+    if not all(e in KNOWN_EFFECTS for e in model["effects"]):
+        return None
+    try:
+        changes = arm_plant_changes(parse_model(model, "the model"))
+    except ConfigError as exc:  # the diagnosis stands; only its use as a plant fails
+        return {"applied": [], "not_applied": [f"not usable as a plant model: {exc}"]}
+    return {"applied": applied_parts(changes), "not_applied": list(changes.not_applied)}
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    import dataclasses
+    import sys
+
+
+    rec = load_for_diagnosis(args.recording)
+    family = family_from_recording(rec)
+    prior = None
+    if args.model:
+
+        read = model_from_episode_config if is_config_path(args.model) else read_model_file
+        family = prior = PriorFamily(family, read(args.model))
+    bar = progress(total=0, desc="diagnose", enabled=sys.stderr.isatty() and not args.json)
+
+    def step(msg: str) -> None:
+        bar.set_postfix_str(msg)
+        bar.update(1)
+
+    diag = diagnose(family, args.seed, report=step)
+    bar.close()
+    if prior is not None:  # the written model: M's effects, corrected, plus the new ones
+        diag = dataclasses.replace(diag, model=prior.combined_model(diag.model))
+    plant = plant_summary({"source": str(args.recording), **diag.model})
+    paths = None
+    if args.report:
+
+        paths = write_report(diag, Path(args.report), str(args.recording), family)
+    if args.json:
+        out = diag.as_dict()
+        if paths:
+            out["report"], out["model_file"] = str(paths[0]), str(paths[1])
+            out["exported_files"] = [str(p) for p in paths[2]]
+        if prior is not None:
+            out["prior_model"], out["fixed_effects"] = args.model, list(prior.fixed)
+        out["plant"] = plant
+        print_json(out)
+    else:
+        if prior is not None:
+            print(f"against {args.model}: {', '.join(prior.fixed) or 'no effects'} fixed at its "
+                  "values (a finding on one of them is a correction)")
+        print_diagnosis(diag, str(args.recording))
+        if paths:
+            print(f"report: {paths[0]}   model: {paths[1]}"
+                  + "".join(f"   for serpar run: {p}" for p in paths[2]))
+        if plant is not None and diag.model["effects"]:
+            print("as a plant model (`serpar run`, plant_model:): applies "
+                  f"{', '.join(plant['applied']) or 'nothing'}"
+                  + "".join(f"\n  warning: {n}" for n in plant["not_applied"]))
+    return 0

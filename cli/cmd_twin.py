@@ -1,0 +1,52 @@
+"""``serpar twin --effect NAME|none``: a recording of a "real" plant with one concealed
+effect; the truth goes to ``answer.json`` beside it, never into the recording."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from serpar.cli.output import print_json
+from serpar.errors import ConfigError
+from serpar.sim.recording import write_recording
+from serpar.twins.registry import effects, make_twin
+
+
+def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("twin", help="make a recording of a plant with a concealed effect "
+                                    "(truth in answer.json)")
+    p.add_argument("--effect", required=True,
+                   help="an effect name (serpar twin --effect list shows them) or none")
+    p.add_argument("--domain", help="arm_static, arm_dynamics, stewart or stewart_motion "
+                                    "(needed only with none; default arm_static)")
+    p.add_argument("--magnitude", type=float,
+                   help="size of the effect (units per domain twin module, e.g. "
+                        "twins/stewart_twin.py: K, m/N, m or x Table 5; default: its default "
+                        "size)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", required=False, help="output folder (recording + answer.json)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_twin)
+    return p
+
+
+def cmd_twin(args: argparse.Namespace) -> int:
+    if args.effect == "list":
+        table = effects()
+        print("none (any domain), " + ", ".join(f"{e} ({d})" for e, d in table.items()))
+        return 0
+    if not args.out:
+        raise ConfigError("--out DIR is required (the recording goes there, the truth to "
+                          "DIR/answer.json)")
+    effect = None if args.effect == "none" else args.effect
+    rec, answer = make_twin(effect, args.magnitude, args.seed, args.domain)
+    out = write_recording(Path(args.out), rec)
+    (out / "answer.json").write_text(json.dumps(answer, indent=2, default=float))
+    if args.json:
+        print_json({"out": str(out), "answer_file": str(out / "answer.json"),
+                    "effect": answer.get("effect"), "domain": answer.get("domain")})
+    else:
+        print(f"wrote {out} ({answer.get('domain')}, effect {answer.get('effect')}); "
+              f"the truth is in {out / 'answer.json'}")
+    return 0

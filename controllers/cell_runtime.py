@@ -1,0 +1,144 @@
+"""The cell running under its controllers: one object that owns the 1 kHz loop.
+
+Each control period it updates the arm controller and the gripper servo, advances the
+physics by the substeps, checks that the integration is healthy and calls the observers
+(recording, progress). Stewart leg commands are written by the task and held by the leg
+servos in MuJoCo itself. Motion primitives (`serpar.tasks.motions`) drive it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+from serpar.controllers.arm_controller import ArmController, ArmControllerConfig
+from serpar.controllers.stewart_servo import StewartServo
+from serpar.errors import UnstableSimulation
+from serpar.sim import names
+from serpar.sim.arm import FINGER_JOINT_NAMES, GRIP_ACTUATOR, GRIP_FORCE_MAX
+from serpar.sim.scene import Scene
+from serpar.sim.stewart import MAX_JOINT_ERROR
+
+MAX_SPEED = 100.0
+"""Any joint or part faster than this [m/s or rad/s] means the integration blew up."""
+
+
+@dataclass
+class GripperServo:
+    """The hand's two modes, like the Franka Hand's `move(width)` and `grasp(force)`:
+    a PD on the jaw width, or a constant squeeze per pad [N]."""
+
+    actuator: int
+    finger_qpos: np.ndarray
+    finger_dof: np.ndarray
+    kp: float = 4000.0
+    """[N/m] on the jaw width: 1 mm error -> 4 N."""
+    kd: float = 20.0
+    width_target: float | None = 0.0
+    squeeze: float = 0.0
+
+    @classmethod
+    def from_model(cls, model: mujoco.MjModel) -> GripperServo:
+        joints = [model.joint(names.ARM + j) for j in FINGER_JOINT_NAMES]
+        return cls(model.actuator(names.ARM + GRIP_ACTUATOR).id,
+                   np.array([j.qposadr[0] for j in joints]), np.array([j.dofadr[0] for j in joints]))
+
+    def open_to(self, width: float) -> None:
+        self.width_target, self.squeeze = width, 0.0
+
+    def grasp(self, squeeze: float) -> None:
+        self.width_target, self.squeeze = None, squeeze
+
+    def width(self, data: mujoco.MjData) -> float:
+        return float(data.qpos[self.finger_qpos].sum())
+
+    def update(self, data: mujoco.MjData) -> None:
+        if self.width_target is None:
+            force = self.squeeze
+        else:  # positive ctrl closes the jaw
+            force = (self.kp * (self.width(data) - self.width_target)
+                     + self.kd * float(data.qvel[self.finger_dof].sum()))
+        data.ctrl[self.actuator] = float(np.clip(force, -GRIP_FORCE_MAX, GRIP_FORCE_MAX))
+
+
+Observer = Callable[["CellRuntime"], None]
+
+
+@dataclass
+class CellRuntime:
+    """A compiled cell, its arm controller, gripper and Stewart command interface."""
+
+    scene: Scene
+    arm: ArmController
+    gripper: GripperServo
+    stewart: StewartServo
+    """Commands legs through the platform's *model* (nominal or calibrated geometry)."""
+    time: float = 0.0
+    phase: str = "start"
+    """What the task is doing (annotations in recordings)."""
+    observers: list[Observer] = field(default_factory=list)
+    substep_probe: Callable[[], None] | None = None
+    """Called after every physics substep when set (e.g. to average a contact force over the
+    control period the way a 1 kHz sensor integrates it); None keeps the fast path."""
+    _warnings: int = 0
+
+    @classmethod
+    def create(cls, scene: Scene, arm_config: ArmControllerConfig, seed: int,
+               stewart: StewartServo | None = None) -> CellRuntime:
+        """Controllers for `scene`; `stewart` defaults to the platform's nominal model (which
+        differs from a platform built with hidden joint errors by those errors)."""
+        if stewart is None:
+            stewart = StewartServo.from_model(scene.model, scene.config.stewart.geometry(),
+                                              names.STEWART, match_tol=MAX_JOINT_ERROR)
+        arm = ArmController(scene.model, names.ARM, arm_config, seed)
+        arm.hold_joints(scene.data.qpos[scene.arm_qpos_adr].copy())
+        return cls(scene, arm, GripperServo.from_model(scene.model), stewart)
+
+    @property
+    def dt(self) -> float:
+        return self.arm.dt
+
+    def step(self) -> None:
+        """One control period."""
+        m, d = self.scene.model, self.scene.data
+        self.arm.update(m, d)
+        self.gripper.update(d)
+        if self.substep_probe is None:
+            mujoco.mj_step(m, d, nstep=self.arm.substeps)
+        else:
+            for _ in range(self.arm.substeps):
+                mujoco.mj_step(m, d)
+                self.substep_probe()
+        self.time += self.arm.dt
+        self._check_health()
+        for observer in self.observers:
+            observer(self)
+
+    def run(self, seconds: float) -> None:
+        for _ in range(round(seconds / self.dt)):
+            self.step()
+
+    def reset_health(self) -> None:
+        """Forget counted warnings (after the state was restored from a snapshot)."""
+        self._warnings = 0
+
+    def _check_health(self) -> None:
+        d = self.scene.data
+        counts = d.warning.number  # one array read: a per-warning Python loop cost 5 % of a cycle
+        warnings = int(counts.sum())
+        if warnings > self._warnings:
+            kinds = [mujoco.mjtWarning(i).name for i in np.flatnonzero(counts)]
+            self._warnings = warnings
+            raise UnstableSimulation(f"MuJoCo warning ({', '.join(kinds)}) at t = {self.time:.3f} s")
+        # One reduction per array: a NaN or inf anywhere makes the sum non-finite.
+        if not (math.isfinite(float(d.qpos.sum())) and math.isfinite(float(d.qvel.sum()))):
+            raise UnstableSimulation(f"NaN or infinite state at t = {self.time:.3f} s")
+        dof = int(np.argmax(np.abs(d.qvel)))
+        if abs(d.qvel[dof]) > MAX_SPEED:
+            m = self.scene.model
+            body = m.body(m.dof_bodyid[dof]).name
+            raise UnstableSimulation(f"state blew up ({body} moving at {abs(d.qvel[dof]):.3g} > "
+                                     f"{MAX_SPEED} m/s or rad/s) at t = {self.time:.3f} s")

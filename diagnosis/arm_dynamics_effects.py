@@ -1,0 +1,243 @@
+"""The candidate effects of the arm-dynamics diagnosis: what each adds to the two channels
+(link-side torque sensor, drive command; see arm_dynamics_terms.py) at a set of rows.
+
+Names match ``serpar.twins.arm_dynamics_twin.EFFECTS``. Each is an extension of the MuJoCo model,
+evaluated with ``mj_rne`` and no hand-written dynamics:
+
+* link inertia and payload are linear in standard inertial parameters, so their regressors
+  are built once, at every sample and then windowed exactly like the channels (from the
+  arm with all but one link massless, and from 10 reference payload bodies);
+* friction and sensor gain are linear regressors on the data and the nominal torque;
+* latency shifts the windowed command (a cubic spline) by the delay;
+* sensor timing shifts the link channel's model by the torque sensors' lag behind the
+  encoders, to first order (minus lag x the windowed rate of the nominal link torque);
+* encoder offsets are evaluated exactly per call, ``mj_rne`` at the offset angles of the rows
+  asked for (a few hundred), so no linearisation error enters a fit.
+
+Bounds admit unphysical signs (negative friction, mass or delay): an absent effect's estimate
+then scatters about zero with an honest uncertainty instead of piling up on a bound.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+from serpar.diagnosis.arm_dynamics_terms import Terms
+from serpar.diagnosis.family import Effect
+from serpar.sim.rigid_arm import (
+    FLANGE_BODY,
+    FLANGE_Z,
+    LINK_BODIES,
+    ArmDynamics,
+    rigid_arm_spec,
+)
+
+Vec = NDArray[np.float64]
+J = range(1, 8)
+
+OFFSET_JOINTS = (2, 3, 4, 5, 6)
+"""Joints whose encoder offset the dynamics can see: gravity is along joint 1's axis (its
+offset changes no torque), and joint 7 turns only the near-axial hand."""
+
+PAYLOAD_PARAMS = ("mass", "com_x", "com_y", "com_z", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
+"""Link-7 (flange) axes; CoM from the flange origin; inertia tensor about the CoM. The
+x0 mass is not zero: at zero mass the CoM has no gradient to start from."""
+STICK_VELOCITY = 0.01
+"""[rad/s] Below this a joint with dry friction may be stuck, and its Coulomb force is then
+anywhere in [-Fc, Fc] (whatever balances the drive): rows weigh such samples as an interval,
+not a value. Above it the twin's MuJoCo frictionloss is >= 99 % of Fc, and the encoder
+velocity (central difference, noise ~1e-3 rad/s) has a certain sign."""
+
+BASELINE = Effect(
+    "torque_tare", "torque sensor offsets (tares)", tuple(f"tare{j}" for j in J), ("N m",) * 7,
+    np.zeros(7), np.full(7, -20.0), np.full(7, 20.0))
+"""Always fitted: a torque sensor's zero drifts between tares on every real arm (Panda:
+~0.05 N m), so an offset alone is not missing physics."""
+
+EFFECTS: tuple[Effect, ...] = (
+    Effect("joint_friction", "joint friction (Coulomb + viscous, inside the drive)",
+           tuple(f"Fc{j}" for j in J) + tuple(f"Fv{j}" for j in J),
+           ("N m",) * 7 + ("N m s/rad",) * 7, np.zeros(14),
+           np.r_[np.full(7, -10.0), np.full(7, -5.0)], np.r_[np.full(7, 10.0), np.full(7, 5.0)]),
+    Effect("payload", "unmodelled payload at the flange (mass, centre of mass, inertia about it)",
+           PAYLOAD_PARAMS, ("kg", "m", "m", "m") + ("kg m^2",) * 6,
+           np.r_[0.1, 0.0, 0.0, 0.05, np.zeros(6)],
+           np.r_[-3.0, -0.3, -0.3, -0.3, np.full(6, -0.1)],
+           np.r_[5.0, 0.3, 0.3, 0.5, np.full(6, 0.1)]),
+    Effect("link_inertia", "link mass/inertia error (relative, per link)",
+           tuple(f"link{j}" for j in J), ("1",) * 7, np.zeros(7), np.full(7, -0.9), np.full(7, 2.0)),
+    Effect("torque_sensor", "torque sensor gain error (relative, per joint)",
+           tuple(f"gain{j}" for j in J), ("1",) * 7, np.zeros(7), np.full(7, -0.5), np.full(7, 0.5)),
+    Effect("latency", "actuation latency (command reaches the joint late)", ("delay",), ("s",),
+           np.zeros(1), np.array([-0.005]), np.array([0.03])),
+    Effect("sensor_timing", "torque sensors sampled out of step with the encoders (lag)",
+           ("lag",), ("s",), np.zeros(1), np.array([-0.005]), np.array([0.005])),
+    Effect("encoder_offset", "joint encoder offsets (measured minus true angle)",
+           tuple(f"offset{j}" for j in OFFSET_JOINTS), ("rad",) * len(OFFSET_JOINTS),
+           np.zeros(len(OFFSET_JOINTS)), np.full(len(OFFSET_JOINTS), -0.2),
+           np.full(len(OFFSET_JOINTS), 0.2)),
+)
+
+
+class EffectModels:
+    """Contributions of the candidate effects to (link, drive) at given rows, N m."""
+
+    def __init__(self, terms: Terms, dynamics: ArmDynamics) -> None:
+        self.terms, self.dyn = terms, dynamics
+        rows = terms.rows
+        v = terms.dq_full
+        # friction: Coulomb sign where the joint surely moves, the viscous velocity, and the
+        # window's weight of possibly stuck samples, all windowed like the command
+        moving = np.abs(v) >= STICK_VELOCITY
+        self.coulomb = rows.at(np.sign(v) * moving)
+        self.viscous = rows.at(v)
+        self.stuck = rows.at((~moving).astype(float))
+        # rows x joint x link, for the link channel (sensor timing) and the drive channel
+        self.inertia_link, self.inertia_drive = self._per_link()
+        self.base_link = dynamics.link_torque(terms.q_link, terms.dq_link, terms.ddq_link)
+        self.base_drive = dynamics.link_torque(terms.q, terms.dq, terms.ddq)
+        self.payload_link, self.payload_drive = self._payload_regressor()
+        # sensor timing: a link torque read `lag` late is the model's, minus lag x its rate
+        full = dynamics.link_torque(terms.q_full, terms.dq_full, terms.a_full)
+        self.link_rate = terms.rows.link_at(np.gradient(full, axis=0) * terms.rate)
+        self._offset_cols = np.array(OFFSET_JOINTS) - 1
+
+    def _per_link(self) -> tuple[Vec, Vec]:
+        """Torque of each link's own inertia, windowed per row like the channels: scaling a
+        link's mass, first moment and inertia together by s adds s times this (inverse
+        dynamics is linear in them). Evaluated at every sample, as the nominal model is."""
+        model, t = self.dyn.model, self.terms
+        mass, inertia = model.body_mass.copy(), model.body_inertia.copy()
+        link, drive, inert = [], [], []
+        try:
+            for name in LINK_BODIES:
+                b = model.body(name).id
+                model.body_mass[:], model.body_inertia[:] = 0.0, 0.0
+                model.body_mass[b], model.body_inertia[b] = mass[b], inertia[b]
+                tau = self.dyn.link_torque(t.q_full, t.dq_full, t.a_full)
+                link.append(t.rows.link_at(tau))
+                drive.append(t.rows.at(tau))
+                inert.append(self.dyn.mass_link_and_full(t.q)[0])
+        finally:
+            model.body_mass[:], model.body_inertia[:] = mass, inertia
+        self.link_mass = np.stack(inert, axis=3)  # rows x 7 x 7 x link
+        return np.stack(link, axis=2), np.stack(drive, axis=2)
+
+    def contributions(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
+                      ) -> tuple[Vec, Vec, Vec]:
+        """(link, drive, band): torques the active effects add to each channel, and the
+        half-width of the interval the drive residual may lie in unexplained (stiction)."""
+        t = self.terms
+        link = np.zeros((len(rows), 7))
+        drive = np.zeros((len(rows), 7))
+        band = np.zeros((len(rows), 7))
+        if "sensor_timing" in params:
+            link -= self.link_rate[rows] * params["sensor_timing"][0]
+        if "joint_friction" in params:
+            p = params["joint_friction"]
+            drive += self.coulomb[rows] * p[:7] + self.viscous[rows] * p[7:]
+            band += self.stuck[rows] * np.abs(p[:7])
+        if "link_inertia" in params:
+            link += self.inertia_link[rows] @ params["link_inertia"]
+            drive += self.inertia_drive[rows] @ params["link_inertia"]
+        if "payload" in params:
+            phi = standard_parameters(params["payload"])
+            link += self.payload_link[rows] @ phi
+            drive += self.payload_drive[rows] @ phi
+        if "encoder_offset" in params:
+            link += self._offset_torque(params["encoder_offset"], rows, sensor=True)
+            drive += self._offset_torque(params["encoder_offset"], rows, sensor=False)
+        if "torque_sensor" in params:
+            link += t.tau_link_model[rows] * params["torque_sensor"]
+        if "latency" in params:
+            shift = float(params["latency"][0]) * t.rate
+            centre = t.rows.centre[rows].astype(float)
+            # the drive delivered the command of `delay` ago: the model must explain that one
+            drive -= t.command(centre - shift) - t.command(centre)
+        return link, drive, band
+
+    def added_inertia(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec | None:
+        """rows x 7 x 7: the inertia the active effects add to the nominal model (None: none)."""
+        added = None
+        if "payload" in params:
+            added = self.payload_mass[rows] @ standard_parameters(params["payload"])
+        if "link_inertia" in params:
+            d = self.link_mass[rows] @ params["link_inertia"]
+            added = d if added is None else added + d
+        return added
+
+    def _state(self, rows: NDArray[np.int64], sensor: bool) -> tuple[Vec, Vec, Vec]:
+        t = self.terms
+        if sensor:
+            return t.q_link[rows], t.dq_link[rows], t.ddq_link[rows]
+        return t.q[rows], t.dq[rows], t.ddq[rows]
+
+    def _payload_regressor(self) -> tuple[Vec, Vec]:
+        """rows x joint x 10: torque per standard inertial parameter of a rigid payload on
+        link 7 (mass, first moments, inertia about the link-7 origin), windowed like the
+        channels. Inverse dynamics is linear in these, so torques of 10 payload bodies with
+        independent parameter vectors, evaluated at every sample, give the regressor."""
+        dyn, body = _payload_model()
+        model, t = dyn.model, self.terms
+        rng = np.random.default_rng(0)
+        phis, link, drive, mass = [], [], [], []
+        for _ in range(10):
+            p = np.r_[rng.uniform(0.5, 2.0), rng.uniform(-0.1, 0.1, 3), rng.uniform(0.0, 0.01, 6)]
+            p[4:7] += 0.02  # diagonal-dominant: a positive-definite tensor
+            _set_payload(model, body, p)
+            phis.append(standard_parameters(p))
+            tau = dyn.link_torque(t.q_full, t.dq_full, t.a_full)
+            link.append(t.rows.link_at(tau))
+            drive.append(t.rows.at(tau))
+            mass.append(dyn.mass_link_and_full(t.q)[0])
+        inv = np.linalg.inv(np.array(phis).T)  # columns: the bodies' parameter vectors
+        self.payload_mass = np.stack(mass, axis=3) @ inv  # rows x 7 x 7 x 10
+        return np.stack(link, axis=2) @ inv, np.stack(drive, axis=2) @ inv
+
+    def _offset_torque(self, p: Vec, rows: NDArray[np.int64], sensor: bool) -> Vec:
+        q, dq, ddq = self._state(rows, sensor)
+        q = q.copy()
+        q[:, self._offset_cols] -= p  # true angle = measured - offset
+        base = self.base_link if sensor else self.base_drive
+        return self.dyn.link_torque(q, dq, ddq) - base[rows]
+
+
+def standard_parameters(p: Vec) -> Vec:
+    """(mass, CoM from the flange, inertia about the CoM) -> (m, m c, inertia about the link-7
+    origin: xx, yy, zz, xy, xz, yz), in which inverse dynamics is linear."""
+    m = p[0]
+    c = np.array([p[1], p[2], FLANGE_Z + p[3]])
+    i_com = np.array([[p[4], p[7], p[8]], [p[7], p[5], p[9]], [p[8], p[9], p[6]]])
+    i_o = i_com + m * (c @ c * np.eye(3) - np.outer(c, c))  # parallel axes
+    return np.r_[m, m * c, i_o[0, 0], i_o[1, 1], i_o[2, 2], i_o[0, 1], i_o[0, 2], i_o[1, 2]]
+
+
+def _set_payload(model: mujoco.MjModel, body: int, p: Vec) -> None:
+    model.body_mass[body] = p[0]
+    model.body_ipos[body] = [p[1], p[2], FLANGE_Z + p[3]]
+    i = np.array([[p[4], p[7], p[8]], [p[7], p[5], p[9]], [p[8], p[9], p[6]]])
+    w, axes = np.linalg.eigh(i)
+    if np.linalg.det(axes) < 0:
+        axes[:, 0] *= -1.0
+    model.body_inertia[body] = w
+    mujoco.mju_mat2Quat(model.body_iquat[body], axes.ravel())
+
+
+def _payload_model() -> tuple[ArmDynamics, int]:
+    """The arm with a payload body on link 7 and every other body massless: its inverse
+    dynamics is the payload's torque alone (body set by :func:`_set_payload`)."""
+    spec = rigid_arm_spec()
+    body = spec.body(FLANGE_BODY).add_body(name="diagnosis_payload", pos=[0, 0, 0])
+    body.mass, body.inertia, body.explicitinertial = 1.0, [1e-6, 1e-6, 1e-6], True
+    # an inertial frame off the body frame (position and rotation) at compile time: else
+    # MuJoCo marks the body "sameframe" and ignores later edits of body_ipos / body_iquat
+    body.ipos = [0.01, 0.02, FLANGE_Z + 0.03]
+    body.iquat = [0.9, 0.1, 0.2, 0.3]
+    model = spec.compile()
+    b = model.body("diagnosis_payload").id
+    model.body_mass[:] = 0.0
+    model.body_inertia[:] = 0.0
+    return ArmDynamics(model), b

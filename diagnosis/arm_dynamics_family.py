@@ -1,0 +1,207 @@
+"""Arm time series (q, tau_J, tau_J_d at ~1 kHz) as a diagnosis family: the nominal model's
+inverse dynamics against the recording, per joint and per channel (arm_dynamics_terms.py),
+with the candidate effects of arm_dynamics_effects.py.
+
+Rows are windows (arm_dynamics_signals.py): one row = 14 whitened residuals, the link-side
+torque sensor (channel ``tau_J<j>``) and the drive command (channel ``tau_J_d<j>``) of each
+joint. Training and held-out rows are alternate blocks of :data:`BLOCK_S` seconds; the
+windows tile the time axis, so no held-out sample enters a training row.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from itertools import pairwise
+
+import numpy as np
+from numpy.typing import NDArray
+from serpar.diagnosis.arm_dynamics_effects import BASELINE, EFFECTS, EffectModels
+from serpar.diagnosis.arm_dynamics_signals import SmoothingConfig, read_arm_series
+from serpar.diagnosis.arm_dynamics_terms import Terms, compute_terms, row_sigma
+from serpar.diagnosis.family import Effect, LocateRow
+from serpar.diagnosis.locate import locate_rows
+from serpar.errors import IdentificationError
+from serpar.sim import channels as ch
+from serpar.sim.recording import Recording
+from serpar.sim.rigid_arm import ArmDynamics
+
+Vec = NDArray[np.float64]
+
+KIND = "arm_dynamics"
+BLOCK_S = 2.0
+"""Length of the alternating training / held-out time blocks [s]."""
+CHANNELS: tuple[str, ...] = ch.TAU_J + ch.TAU_J_D
+"""Residual columns of one row, in order."""
+TOP_SHARE = 0.25
+"""A row is in a joint's "high gravity load" / "high acceleration" regime when it is in the
+top quarter of that joint's |g| / |q̈| over the recording."""
+TIME_BINS = 3
+SCALE_RANGE = (0.5, 2.0)
+"""Accepted regression slope of a joint's measured on its nominal torque: a payload or a gain
+error moves it by tens of per cent; N mm for N m, or another robot, by far more."""
+PIN_SHARE = 0.5
+"""A drifting tare's knot is kept only with a training row within this share of the spacing:
+a knot that only distant rows pin is fixed by leverage, and noise swings it."""
+SCALE_MIN_RMS = 1.0
+"""[N m] Joints whose nominal torque varies less than this are not tested for scale."""
+
+
+@dataclass(frozen=True)
+class ArmDynamicsConfig:
+    smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
+    block_s: float = BLOCK_S
+    tare_knot_s: float | None = None
+    """None: one constant tare per torque sensor. A spacing [s]: each sensor's tare is a
+    piecewise-linear function of time with knots this far apart (the baseline then has 7 values
+    per knot), for recordings long enough that the sensor zero's random walk shows."""
+
+    def __post_init__(self) -> None:
+        if not self.block_s > 0:
+            raise IdentificationError(f"ArmDynamicsConfig.block_s={self.block_s} must be > 0")
+        if self.tare_knot_s is not None and not self.tare_knot_s > 0:
+            raise IdentificationError(f"ArmDynamicsConfig.tare_knot_s={self.tare_knot_s} must be "
+                                      "> 0 or None")
+
+
+class ArmDynamicsFamily:
+    """The :class:`~serpar.diagnosis.family.Family` of one arm recording."""
+
+    kind = KIND
+
+    def __init__(self, terms: Terms, dynamics: ArmDynamics, cfg: ArmDynamicsConfig,
+                 phases: tuple[tuple[str, float, float], ...] = ()) -> None:
+        self.terms, self.cfg = terms, cfg
+        self.baseline: Effect | None = BASELINE
+        self._knots: Vec | None = None
+        if cfg.tare_knot_s is not None:
+            self.pin_tare_knots(np.arange(len(terms.time)))
+        self.effects: tuple[Effect, ...] = EFFECTS
+        self.n_samples = len(terms.time)
+        self._models = EffectModels(terms, dynamics)
+        self._phases = phases
+        self._regimes = self._regime_masks()
+
+    # -- Family protocol -------------------------------------------------------------------
+    def residual(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
+        rows = np.asarray(rows, np.int64)
+        t = self.terms
+        link_model, drive_model, band = self._models.contributions(params, rows)
+        link = t.link[rows] - link_model
+        if BASELINE.name in params:
+            link = link - self._tare(params[BASELINE.name], rows)
+        drive = t.drive[rows] - drive_model
+        # stiction: within the band the drive's residual is static friction, not a misfit
+        drive = np.sign(drive) * np.maximum(np.abs(drive) - band, 0.0)
+        added = self._models.added_inertia(params, rows)
+        if added is None:
+            sigma_link, sigma_drive = t.sigma_link[rows], t.sigma_drive[rows]
+        else:
+            sigma_link, sigma_drive = row_sigma(t.measurement_var, t.acc_var,
+                                                t.mass_link[rows] + added, t.mass_full[rows] + added)
+        return np.hstack([link / sigma_link, drive / sigma_drive]).ravel()
+
+    def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        block = np.floor((self.terms.time - self.terms.time[0]) / self.cfg.block_s).astype(int)
+        first = int(rng.integers(2))  # which parity trains: either way, whole blocks
+        train = np.flatnonzero(block % 2 == first)
+        held = np.flatnonzero(block % 2 != first)
+        if train.size == 0 or held.size == 0:
+            raise IdentificationError(f"a recording of {self.terms.time[-1] - self.terms.time[0]:.1f} s "
+                                      f"gives no two {self.cfg.block_s} s blocks to train and hold out")
+        return train, held
+
+    def locate(self, rows: NDArray[np.int64], whitened: Vec) -> list[LocateRow]:
+        rows = np.asarray(rows, np.int64)
+        w = np.asarray(whitened, float).reshape(len(rows), len(CHANNELS))
+        groups = []
+        for c, channel in enumerate(CHANNELS):
+            j = c % 7
+            groups.append((channel, "all", "all rows", w[:, c]))
+            for (group, label), mask in self._regimes.items():
+                m = mask[rows] if mask.ndim == 1 else mask[rows, j]
+                groups.append((channel, group, label, w[m, c]))
+        return locate_rows(groups)
+
+    def pin_tare_knots(self, train: NDArray[np.int64]) -> None:
+        """Keep the drifting tare's knots that training rows pin (a row within one spacing):
+        a knot only held-out rows could fix would be a free parameter fitted on nothing."""
+        if self.cfg.tare_knot_s is not None:
+            self._knots, self.baseline = drifting_tare(self.terms.time, self.terms.time[train],
+                                                       self.cfg.tare_knot_s)
+
+    def _tare(self, values: Vec, rows: NDArray[np.int64]) -> Vec:
+        """Per-row tares (rows, 7): constant, or interpolated between the knots."""
+        if self._knots is None:
+            return values
+        table = values.reshape(len(self._knots), 7)
+        t = self.terms.time[rows]
+        return np.stack([np.interp(t, self._knots, table[:, j]) for j in range(7)], axis=1)
+
+    # -- where -----------------------------------------------------------------------------
+    def _regime_masks(self) -> dict[tuple[str, str], NDArray[np.bool_]]:
+        """Boolean masks over rows (rows, or rows x joints for per-joint regimes)."""
+        t = self.terms
+        v = t.dq_full
+        idx = t.rows.centre[:, None] + np.arange(-t.rows.half, t.rows.half + 1)[None, :]
+        window = v[idx]  # rows x window x joints
+        reversal = np.any(window > 0, axis=1) & np.any(window < 0, axis=1)
+
+        def top(x: Vec) -> NDArray[np.bool_]:
+            mag = np.abs(x)
+            # a joint whose |x| never rises above round-off (gravity on joint 1) has no regime
+            return (mag >= np.quantile(mag, 1.0 - TOP_SHARE, axis=0)) & (mag > 1e-6)
+
+        masks = {("regime", "velocity reversal"): reversal,
+                 ("regime", "high gravity load"): top(t.gravity),
+                 ("regime", "high acceleration"): top(t.ddq)}
+        span = t.time[-1] - t.time[0]
+        edges = t.time[0] + span * np.arange(TIME_BINS + 1) / TIME_BINS
+        for a, b in pairwise(edges):
+            masks[("elapsed time", f"{a:.0f}-{b:.0f} s")] = (t.time >= a) & (t.time <= b)
+        if len({p[0] for p in self._phases}) > 1:
+            for name, a, b in self._phases:
+                key = ("phase", name)
+                inside = (t.time >= a) & (t.time <= b)
+                masks[key] = masks.get(key, np.zeros_like(inside)) | inside
+        return masks
+
+
+def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None
+                          ) -> ArmDynamicsFamily:
+    """The arm-dynamics family of `rec` (IdentificationError names what the recording lacks)."""
+    cfg = cfg or ArmDynamicsConfig()
+    series = read_arm_series(rec)
+    dynamics = ArmDynamics()
+    terms = compute_terms(series, cfg.smoothing, dynamics)
+    check_scale(terms)
+    phases = tuple((p.name, p.start, p.end) for p in rec.meta.phases)
+    return ArmDynamicsFamily(terms, dynamics, cfg, phases)
+
+
+def drifting_tare(time: Vec, pinned_by: Vec, spacing_s: float) -> tuple[Vec, Effect]:
+    """Knot times (every ``spacing_s`` from the first row, each with a ``pinned_by`` time
+    within one spacing) and the baseline Effect of a piecewise-linear tare per sensor
+    (constant beyond the end knots)."""
+    grid = time[0] + spacing_s * np.arange(int(np.ceil((time[-1] - time[0]) / spacing_s)) + 1)
+    near = np.abs(grid[:, None] - pinned_by[None, :]).min(axis=1) < PIN_SHARE * spacing_s
+    knots = grid[near]
+    names = tuple(f"tare{j}@{t - time[0]:.0f}s" for t in knots for j in range(1, 8))
+    k = len(names)
+    return knots, Effect(BASELINE.name, "torque sensor offsets (tares), drifting in time", names,
+                         ("N m",) * k, np.zeros(k), np.full(k, -20.0), np.full(k, 20.0))
+
+
+def check_scale(terms: Terms) -> None:
+    """IdentificationError when a torque channel does not scale like the nominal model: units
+    other than N m, or a recording of another robot."""
+    for name, measured, model in (("tau_J", terms.link + terms.tau_link_model, terms.tau_link_model),
+                                  ("tau_J_d", terms.drive + terms.tau_full_model, terms.tau_full_model)):
+        x = model - model.mean(axis=0)
+        y = measured - measured.mean(axis=0)
+        for j in np.flatnonzero(np.sqrt(np.mean(x**2, axis=0)) > SCALE_MIN_RMS):
+            slope = float(x[:, j] @ y[:, j] / (x[:, j] @ x[:, j]))
+            if not SCALE_RANGE[0] <= slope <= SCALE_RANGE[1]:
+                raise IdentificationError(
+                    f"{name}{j + 1} varies {slope:.3g} times as much as the nominal Panda model "
+                    "predicts from q: not in N m, or a recording of another robot")

@@ -1,0 +1,189 @@
+"""Arm time series for the dynamics diagnosis: read and check a recording, and the one
+smoothing kernel every compared quantity goes through.
+
+Why smoothing, and why one kernel. Inverse dynamics needs q̈, and differentiating 20-bit
+encoder readings twice at 1 kHz gives ~4 rad/s² of noise per sample. So every quantity —
+the measured torques, the command, and the model's torque evaluated at *every* sample from
+the raw second difference of q — is averaged by the same Hann window of ``window`` samples
+and compared once per window (rows, one every ``window`` samples). Because the model is
+linear in q̈ and evaluated before averaging, smoothing both sides by one kernel is
+consistent to the 1 kHz sampling, not just to the window's polynomial order; a smooth
+window (Hann, not Savitzky-Golay, whose sharp ends pass the differentiated quantisation
+noise) keeps q̈'s noise ~40x lower (2.4e-3 rad/s² for a 51-sample window); rows a window apart have independent noise, which the
+chi-square tests downstream assume.
+
+Sampling model (what a row k's samples mean, see docs of sim/plants/moving_panda.py):
+``q`` at t_k; ``tau_J`` the mean over the period ending at t_k (centred half a period
+earlier); ``tau_J_d`` held over [t_k, t_k+1), so its continuous mean around t_k is the mean
+of the commands k-1 and k.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+from numpy.typing import NDArray
+from serpar.errors import IdentificationError
+from serpar.sim import channels as ch
+from serpar.sim.arm import Q_MAX, Q_MIN
+from serpar.sim.recording import Recording
+
+Vec = NDArray[np.float64]
+
+REQUIRED = ch.Q + ch.TAU_J + ch.TAU_J_D
+"""Channels the diagnosis reads (dq is optional: velocities come from the encoders)."""
+RATE_TOLERANCE = 0.01
+"""Largest relative deviation of a sampling interval from 1/sample_rate_hz."""
+Q_MARGIN = 0.2
+"""[rad] beyond a Panda joint limit that a recorded angle may reach (encoder offsets, tool
+calibration); farther out the recording is of another robot or in degrees."""
+MIN_ROWS = 40
+"""Fewest comparison rows (windows) a recording must give."""
+
+
+@dataclass(frozen=True)
+class SmoothingConfig:
+    window: int = 51
+    """Hann window length [samples], odd; rows are this many samples apart."""
+
+    def __post_init__(self) -> None:
+        if self.window < 5 or self.window % 2 == 0:
+            raise IdentificationError(f"SmoothingConfig.window={self.window}: an odd number >= 5")
+
+    def kernel(self) -> Vec:
+        """The averaging window (sums to one, zero ends excluded)."""
+        k = scipy.signal.windows.hann(self.window + 2)[1:-1]
+        return k / k.sum()
+
+
+@dataclass(frozen=True)
+class ArmSeries:
+    """The checked signals of one arm recording, rows = samples, columns = joints 1..7."""
+
+    time: Vec
+    rate: float
+    q: Vec
+    tau_J: Vec
+    tau_J_d: Vec
+    sigma_q: Vec
+    sigma_tau: Vec
+    sigma_cmd: Vec
+    """Noise of the delivered torque about the command (the drive's torque ripple)."""
+
+
+def _column(rec: Recording, name: str) -> Vec:
+    col = rec.signals.column(name)
+    if col.null_count:
+        raise IdentificationError(f"channel {name} has {col.null_count} missing sample(s): "
+                                  "channels of unequal length or gaps; every channel needs "
+                                  f"all {rec.signals.num_rows} samples")
+    x = col.to_numpy().astype(float)
+    bad = np.flatnonzero(~np.isfinite(x))
+    if bad.size:
+        raise IdentificationError(f"channel {name} has {bad.size} non-finite sample(s) (NaN/inf), "
+                                  f"first at row {bad[0]}")
+    return x
+
+
+def _sigmas(rec: Recording, names: tuple[str, ...], default: Vec | None) -> Vec:
+    got = rec.meta.noise_sigma
+    if default is None and any(n not in got for n in names):
+        missing = [n for n in names if n not in got]
+        raise IdentificationError(f"meta.json noise_sigma lacks {', '.join(missing)}: the "
+                                  "diagnosis judges 'beyond noise' against it")
+    s = np.array([float(got.get(n, np.nan)) for n in names])
+    if default is not None:
+        s = np.where(np.isfinite(s), s, default)
+    if np.any(~np.isfinite(s)) or np.any(s < 0):
+        raise IdentificationError(f"noise_sigma of {names[0]}..{names[-1]} must be finite and >= 0, got {s}")
+    return s
+
+
+def read_arm_series(rec: Recording) -> ArmSeries:
+    """The arm signals of `rec`, or IdentificationError naming what is wrong with them.
+    noise_sigma must give q and tau_J; tau_J_d's (the drive's torque ripple about the
+    command) defaults to tau_J's when the recording does not state it."""
+    cols = set(rec.signals.column_names)
+    missing = [c for c in ("time",) + REQUIRED if c not in cols]
+    if missing:
+        raise IdentificationError(f"the arm-dynamics diagnosis needs channels {', '.join(missing)}"
+                                  " (libfranka q, tau_J, tau_J_d of 7 joints), not in the recording")
+    t = _column(rec, "time")
+    if t.size < 3 or np.any(np.diff(t) <= 0):
+        bad = int(np.argmax(np.diff(t) <= 0)) + 1 if t.size >= 2 else 0
+        raise IdentificationError(f"time must increase strictly (row {bad} repeats or goes back)")
+    rate = float(rec.meta.sample_rate_hz)
+    dt = np.diff(t)
+    if np.max(np.abs(dt * rate - 1.0)) > RATE_TOLERANCE:
+        worst = int(np.argmax(np.abs(dt * rate - 1.0)))
+        raise IdentificationError(f"samples are not uniform at {rate:g} Hz (interval {dt[worst]:.6g} s "
+                                  f"at row {worst + 1}); resample before diagnosing")
+    q = np.column_stack([_column(rec, c) for c in ch.Q])
+    lo, hi = np.asarray(Q_MIN) - Q_MARGIN, np.asarray(Q_MAX) + Q_MARGIN
+    outside = np.flatnonzero(np.any((q < lo) | (q > hi), axis=0))
+    if outside.size:
+        j = int(outside[0])
+        raise IdentificationError(f"q{j + 1} reaches {q[:, j].min():.3g}..{q[:, j].max():.3g}, outside the "
+                                  f"Panda's range {Q_MIN[j]}..{Q_MAX[j]} rad: degrees, or another robot?")
+    tau = np.column_stack([_column(rec, c) for c in ch.TAU_J])
+    cmd = np.column_stack([_column(rec, c) for c in ch.TAU_J_D])
+    sigma_tau = _sigmas(rec, ch.TAU_J, None)
+    return ArmSeries(t, rate, q, tau, cmd, _sigmas(rec, ch.Q, None), sigma_tau,
+                     _sigmas(rec, ch.TAU_J_D, sigma_tau))
+
+
+@dataclass(frozen=True)
+class Rows:
+    """The comparison rows: window centres, one window apart, each window inside the data."""
+
+    centre: NDArray[np.int64]
+    kernel: Vec
+
+    @classmethod
+    def of(cls, n_samples: int, cfg: SmoothingConfig) -> Rows:
+        w = cfg.window
+        # the full-rate model needs samples k-1..k+1 and the link sample's half-period shift
+        first = w // 2 + 2
+        centre = np.arange(first, n_samples - w // 2 - 2, w, dtype=np.int64)
+        if centre.size < MIN_ROWS:
+            raise IdentificationError(f"{n_samples} samples give {centre.size} windows of {w}; the "
+                                      f"diagnosis needs >= {MIN_ROWS} (a recording of >= "
+                                      f"{(MIN_ROWS + 1) * w} samples)")
+        return cls(centre, cfg.kernel())
+
+    @property
+    def half(self) -> int:
+        return len(self.kernel) // 2
+
+    def at(self, x: Vec) -> Vec:
+        """Kernel-weighted mean of the full-rate series `x` (samples x ...) at every row."""
+        idx = self.centre[:, None] + np.arange(-self.half, self.half + 1)[None, :]
+        return np.einsum("rm...,m->r...", x[idx], self.kernel)
+
+    def link_at(self, x: Vec) -> Vec:
+        """Window mean of x at each row, x first moved half a sample back (period mean)."""
+        shifted = np.empty_like(x)
+        shifted[1:] = 0.5 * (x[1:] + x[:-1])
+        shifted[0] = x[0]
+        return self.at(shifted)
+
+
+def full_rate_derivatives(q: Vec, rate: float) -> tuple[Vec, Vec]:
+    """Central first and second differences of q at every sample (ends repeated): the
+    unsmoothed velocity and acceleration the model is evaluated with before averaging."""
+    v, a = np.empty_like(q), np.empty_like(q)
+    v[1:-1] = (q[2:] - q[:-2]) * (rate / 2)
+    a[1:-1] = (q[2:] - 2 * q[1:-1] + q[:-2]) * rate**2
+    v[0], v[-1], a[0], a[-1] = v[1], v[-2], a[1], a[-2]
+    return v, a
+
+
+def noise_gains(kernel: Vec, rate: float) -> tuple[float, float, float]:
+    """How white noise of unit sigma comes out of a row: (a measured torque sample; the drive's
+    ripple, held per period, so its continuous mean at a sample is that of two periods; the
+    acceleration from unit encoder noise [rad/s² per rad], a second difference)."""
+    ripple = np.convolve(kernel, [0.5, 0.5])
+    acc = np.convolve(kernel, [1.0, -2.0, 1.0]) * rate**2
+    return float(np.linalg.norm(kernel)), float(np.linalg.norm(ripple)), float(np.linalg.norm(acc))

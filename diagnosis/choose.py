@@ -1,0 +1,81 @@
+"""Which family diagnoses a recording: chosen from what the recording holds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from serpar.calibration.arm_static_data import panda_folder_data, static_data, to_recording
+from serpar.diagnosis.arm_dynamics_family import family_from_recording as dynamics_family
+from serpar.diagnosis.arm_static_family import family_from_data
+from serpar.diagnosis.episode_family import family_from_recording as episode_family
+from serpar.diagnosis.episode_family import is_episode
+from serpar.diagnosis.family import Family
+from serpar.diagnosis.stewart_family import family_from_recording as stewart_family
+from serpar.diagnosis.stewart_motion_effects import MOVING_SHARE, moving_share
+from serpar.diagnosis.stewart_motion_family import family_from_recording as motion_family
+from serpar.errors import IdentificationError
+from serpar.sim import channels as ch
+from serpar.sim.recording import Recording, read_recording
+
+DYNAMICS_CHANNELS = ch.Q + ch.TAU_J
+STEWART_PREFIXES = ("leg", "platform_")
+"""A recording with any channel starting so is meant for the Stewart family, which then names
+whichever of its channels are missing."""
+WHAT = ("a measurements table (q1..q7 with x/y/z or socket: a static calibration set), or arm "
+        "signals q1..7 and tau_J1..7 (a time series, or an assembly episode of serpar run "
+        "--record), or Stewart signals leg_cmd1..6, leg1..6, "
+        "platform_x/y/z/qw/qx/qy/qz (rest holds of the platform, or the platform moving "
+        "continuously), or a panda_1-layout folder")
+
+
+def is_panda_folder(path: Path) -> bool:
+    return (path.is_dir() and not (path / "meta.json").exists()
+            and any((d / "hole_0.csv").is_file() for d in path.iterdir() if d.is_dir()))
+
+
+def load_for_diagnosis(path: str | Path) -> Recording:
+    """A recording folder, or a panda_1-layout folder converted to one."""
+    src = Path(path)
+    if not src.exists():
+        raise IdentificationError(f"{src} does not exist; expected a recording folder "
+                                  "(meta.json + tables) or a panda_1-layout folder")
+    if is_panda_folder(src):
+
+        return to_recording(panda_folder_data(str(src)), "real",
+                            {"imported_from": f"panda_1 layout: {src}"})
+    return read_recording(src)
+
+
+def family_from_recording(rec: Recording) -> Family:
+    """The static arm family when the recording has measurements, else the episode family
+    for an assembly episode (``serpar run --record``), else the arm-dynamics family when it has
+    the arm's joint signals, else a Stewart family when it has Stewart
+    leg or platform channels (the motion family when the leg commands change at most samples,
+    the rest-hold family otherwise); else one line saying what is needed."""
+    if rec.measurements is not None and rec.measurements.num_rows > 0:
+
+        return family_from_data(static_data(rec))
+    cols = set(rec.signals.column_names)
+    if rec.signals.num_rows > 0 and set(DYNAMICS_CHANNELS) <= cols:
+
+        if is_episode(rec):
+            # --- an assembly episode: arm dynamics over its free-motion phases (episode.py)
+
+            return episode_family(rec)
+        # --- arm dynamics time series (diagnosis/arm_dynamics_family.py, a sibling domain)
+
+        return dynamics_family(rec)
+    if rec.signals.num_rows > 0 and any(c.startswith(STEWART_PREFIXES) for c in cols):
+
+        if moving_share(rec) > MOVING_SHARE:
+            # --- Stewart platform in continuous motion (diagnosis/stewart_motion_family.py)
+
+            return motion_family(rec)
+        # --- Stewart platform rest holds (diagnosis/stewart_family.py)
+
+        return stewart_family(rec)
+    raise IdentificationError(f"the recording holds nothing diagnosable; needs {WHAT} "
+                              f"(it has: {', '.join(sorted(cols)) or 'no channels'}, "
+                              f"{rec.signals.num_rows} samples, "
+                              f"{'no' if rec.measurements is None else rec.measurements.num_rows} "
+                              "measurement rows)")

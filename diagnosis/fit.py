@@ -1,0 +1,116 @@
+"""Stage "fit": one model (the baseline plus a set of active effects) by bounded least
+squares on the training rows, scored on the held-out rows.
+
+Uncertainty: the covariance of the whitened problem, (J^T J)^-1 at the optimum, scaled by the
+reduced chi-square when that exceeds one (Birge ratio): a model that does not reach the
+noise floor must not claim the noise-limited precision.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+from serpar.diagnosis.family import Effect, Family
+from serpar.errors import IdentificationError
+
+BASELINE = "baseline"
+"""Key of the baseline's parameters in a parameter mapping when the family's baseline has no
+name of its own (the family's ``baseline.name`` is used otherwise)."""
+
+
+@dataclass(frozen=True)
+class Fit:
+    """One fitted model: parameters per block, their 1-sigma uncertainty, the scores."""
+
+    active: tuple[str, ...]
+    """Effect names, baseline excluded, in the order they were added."""
+    params: Mapping[str, NDArray[np.float64]]
+    std: Mapping[str, NDArray[np.float64]]
+    train_chi2: float
+    n_train: int
+    """Number of training residuals (not rows)."""
+    heldout_chi2: float
+    n_heldout: int
+    n_params: int
+    nfev: int
+
+    @property
+    def bic(self) -> float:
+        """Known-noise BIC on the training residuals: chi^2 + k ln n."""
+        return self.train_chi2 + self.n_params * float(np.log(max(self.n_train, 2)))
+
+    @property
+    def train_rms(self) -> float:
+        return float(np.sqrt(self.train_chi2 / max(self.n_train, 1)))
+
+    @property
+    def heldout_rms(self) -> float:
+        return float(np.sqrt(self.heldout_chi2 / max(self.n_heldout, 1)))
+
+
+def blocks_of(family: Family, active: tuple[str, ...]) -> tuple[Effect, ...]:
+    """The baseline (if any) followed by the named effects of the family."""
+    by_name = {e.name: e for e in family.effects}
+    unknown = [a for a in active if a not in by_name]
+    if unknown:
+        raise IdentificationError(f"unknown effect(s) {', '.join(unknown)}; this recording's "
+                                  f"candidates: {', '.join(by_name) or '(none)'}")
+    base = (family.baseline,) if family.baseline is not None else ()
+    return base + tuple(by_name[a] for a in active)
+
+
+def unpack(blocks: tuple[Effect, ...], x: NDArray[np.float64]) -> dict[str, NDArray[np.float64]]:
+    out, k = {}, 0
+    for b in blocks:
+        out[b.name] = np.asarray(x[k:k + b.n_params], float)
+        k += b.n_params
+    return out
+
+
+def fit_model(family: Family, active: tuple[str, ...], train: NDArray[np.int64],
+              heldout: NDArray[np.int64],
+              start: Mapping[str, NDArray[np.float64]] | None = None) -> Fit:
+    """Fit the baseline and the ``active`` effects on ``train``; score on ``heldout``.
+    ``start``: parameters of a previous fit to begin from (blocks it lacks start at x0)."""
+    blocks = blocks_of(family, active)
+    start = start or {}
+    x0 = np.concatenate([np.clip(start.get(b.name, b.x0), b.lower, b.upper) for b in blocks]
+                        or [np.zeros(0)])
+    lo = np.concatenate([b.lower for b in blocks] or [np.zeros(0)])
+    hi = np.concatenate([b.upper for b in blocks] or [np.zeros(0)])
+
+    def fun(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return family.residual(unpack(blocks, x), train)
+
+    if x0.size == 0:
+        r = fun(x0)
+        return _score(family, active, blocks, x0, r, np.zeros((r.size, 0)), heldout, 1)
+    # a family may offer its exact Jacobian (columns in block order); else 2-point differences
+    exact = getattr(family, "jacobian", None)
+    jac = "2-point" if not callable(exact) else (lambda x: exact(unpack(blocks, x), train))
+    sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
+                        xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=200 * (x0.size + 1))
+    if not np.all(np.isfinite(sol.fun)):
+        raise IdentificationError(f"the fit of {'+'.join(active) or 'the baseline'} produced "
+                                  "non-finite residuals")
+    return _score(family, active, blocks, sol.x, sol.fun, sol.jac, heldout, int(sol.nfev))
+
+
+def _score(family: Family, active: tuple[str, ...], blocks: tuple[Effect, ...],
+           x: NDArray[np.float64], r: NDArray[np.float64], jac: NDArray[np.float64],
+           heldout: NDArray[np.int64], nfev: int) -> Fit:
+    params = unpack(blocks, x)
+    chi2 = float(r @ r)
+    k = x.size
+    jac = np.asarray(jac, float)
+    cov = np.linalg.pinv(jac.T @ jac) if k else np.zeros((0, 0))
+    dof = max(r.size - k, 1)
+    cov = cov * max(1.0, chi2 / dof)
+    std = unpack(blocks, np.sqrt(np.clip(np.diag(cov), 0.0, None)))
+    held = family.residual(params, heldout) if heldout.size else np.zeros(0)
+    return Fit(active, params, std, chi2, int(r.size), float(held @ held), int(held.size), k,
+               nfev)

@@ -1,3 +1,0 @@
-from serpar.cli import main
-
-raise SystemExit(main())

@@ -1,0 +1,66 @@
+"""The recording schema's channel and column names (docs/recording.md): the one place every
+writer and reader of a recording takes them from. libfranka's names where one exists."""
+
+from __future__ import annotations
+
+import re
+
+
+def numbered(prefix: str, count: int) -> tuple[str, ...]:
+    """prefix1 .. prefix<count>."""
+    return tuple(f"{prefix}{i}" for i in range(1, count + 1))
+
+
+TIME = "time"
+PHASE = "phase"
+USER_PREFIX = "x_"
+"""User channels: any name starting with x_."""
+
+# the arm (libfranka RobotState)
+Q = numbered("q", 7)
+DQ = numbered("dq", 7)
+TAU_J = numbered("tau_J", 7)
+"""Measured link-side joint torques [N m]."""
+TAU_J_D = numbered("tau_J_d", 7)
+"""Commanded joint torques [N m]."""
+F_EXT = numbered("O_F_ext_hat_K", 6)
+"""Estimated external wrench at the TCP, base frame [N, N m]."""
+TCP_POSITION = ("O_T_EE_x", "O_T_EE_y", "O_T_EE_z")
+TCP_QUAT = ("O_T_EE_qw", "O_T_EE_qx", "O_T_EE_qy", "O_T_EE_qz")
+
+# the Stewart platform
+LEG_CMD = numbered("leg_cmd", 6)
+"""Commanded leg lengths l_min + stroke [m]."""
+LEG = numbered("leg", 6)
+"""Measured leg lengths [m]."""
+PLATFORM_POSITION = ("platform_x", "platform_y", "platform_z")
+PLATFORM_QUAT = ("platform_qw", "platform_qx", "platform_qy", "platform_qz")
+"""Platform pose in the Stewart base frame [m, unit quaternion w x y z]."""
+
+# the cell
+GRIPPER_WIDTH = "gripper_width"
+CONTACT_FORCE = ("contact_force_x", "contact_force_y", "contact_force_z")
+
+KNOWN = (TIME, PHASE, *Q, *DQ, *TAU_J, *TAU_J_D, *F_EXT, *TCP_POSITION, *TCP_QUAT, *LEG_CMD, *LEG,
+         *PLATFORM_POSITION, *PLATFORM_QUAT, GRIPPER_WIDTH, *CONTACT_FORCE)
+KNOWN_HELP = ("time, phase, q1..7, dq1..7, tau_J1..7, tau_J_d1..7, O_F_ext_hat_K1..6, "
+              "O_T_EE_x/y/z/qw/qx/qy/qz, leg_cmd1..6, leg1..6, platform_x/y/z/qw/qx/qy/qz, "
+              "gripper_width, contact_force_x/y/z, x_<anything>")
+
+# the measurements table (static calibration sets)
+MEASUREMENT_KINDS = ("position", "point")
+MEASUREMENT_SETS = ("train", "verify")
+APPROACH = numbered("approach", 7)
+"""Joint angles the arm came from before settling into a measured pose [rad]."""
+MEASUREMENT_REQUIRED = (*Q, "kind")
+MEASUREMENT_OPTIONAL = ("x", "y", "z", "socket", "time", "set", "placement", *APPROACH)
+MEASUREMENT_HELP = "q1..q7, kind, x/y/z (position), socket (point), time, approach1..7, set, placement"
+
+
+def is_channel(name: str) -> bool:
+    """A signals column the schema knows (or a user channel)."""
+    return name in _KNOWN_SET or _USER_RE.fullmatch(name) is not None
+
+
+_KNOWN_SET = frozenset(KNOWN)
+_USER_RE = re.compile(re.escape(USER_PREFIX) + r"[A-Za-z0-9_]+")

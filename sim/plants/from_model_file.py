@@ -1,0 +1,214 @@
+"""A diagnosis model file turned into changes of the simulated arm (sim/plants/arm_changes.py), so that
+`serpar run` simulates the cell the diagnosis found, not the nominal one.
+
+Per effect (parameter names as the families write them: arm_dynamics_effects.py,
+arm_static_effects.py, kinematics/mdh.py):
+
+| effect | parameters | plant |
+|---|---|---|
+| joint_friction | Fc<j> [N m], Fv<j> [N m s/rad] | joint ``frictionloss`` = Fc; ``damping`` = nominal + Fv |
+| payload | mass, com_x/y/z (from the flange), Ixx..Iyz (about the CoM) | a body on link 7 at the flange |
+| link_inertia | link<j> (relative) | link j's mass and inertia x (1 + link<j>) |
+| encoder_offset | offset<j> = measured - true [rad] | joint ``ref`` = offset |
+| encoder | o<j> (link = (1 + s) q + o), s<j> | joint ``ref`` = -o; the scale s is not expressible |
+| geometric | j<i>.alpha/a/theta/d/beta | body link<i>'s pos/quat (beta: the next frame) |
+| latency | delay [s] | arm actuators' ``delay`` |
+
+Not expressible, and reported (``ArmPlantChanges.not_applied``), with the reason in
+:data:`NOT_APPLICABLE`. A value the plant cannot take (negative friction or mass, a non-physical
+inertia tensor) is clamped or left out, and reported too: nothing is dropped silently.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from serpar.errors import ConfigError
+from serpar.sim.arm import JOINT_NAMES, N_JOINTS, build_arm_spec
+from serpar.sim.model_file import DiagnosisModel, ParamBlock, read_model_file
+from serpar.sim.plants.arm_changes import MDH_PARAMS, ArmPlantChanges, PayloadBody, inertia_problem
+
+J = range(1, N_JOINTS + 1)
+NOT_APPLICABLE: dict[str, str] = {
+    "joint_compliance": "a compliant joint needs a passive stiff hinge between motor and link "
+                        "(an extra DoF per joint that the arm's controllers, recordings and "
+                        "qpos addresses do not have)",
+    "backlash": "a clearance needs a passive limited hinge between motor and link (an extra "
+                "DoF per joint that the arm's controllers, recordings and qpos addresses do "
+                "not have)",
+    "thermal_drift": "link lengths that grow with elapsed time: an MjModel's geometry is fixed "
+                     "for an episode",
+    "torque_sensor": "a torque sensor's gain is its calibration, not physics: MuJoCo's torque "
+                     "sensors have no gain",
+    "sensor_timing": "when the torque sensors are sampled is the sensor model's timing, not the "
+                     "arm's physics",
+    "contact_friction": "the journal/bore friction belongs to the cell's contacts, not the arm: "
+                        "set the episode config's contact_friction to 0.2 + d_mu",
+}
+PAYLOAD = ("mass", "com_x", "com_y", "com_z", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
+POINT_MASS_INERTIA = 1e-9
+"""[kg m^2] Principal moments given to a payload whose fitted tensor is not physical."""
+
+
+@dataclass
+class _Draft:
+    """The changes being collected (mutable while one file is mapped)."""
+
+    nominal_damping: tuple[float, ...]
+    fields: dict[str, object] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    def per_joint(self, key: str, start: tuple[float, ...]) -> list[float]:
+        return self.fields.setdefault(key, list(start))  # type: ignore[return-value]
+
+
+def _names(effect: str, block: ParamBlock, valid: tuple[str, ...]) -> dict[str, float]:
+    bad = [n for n in block.names if n not in valid]
+    if bad:
+        raise ConfigError(f"{effect}: unknown parameter(s) {', '.join(bad)}; valid: "
+                          f"{', '.join(valid)}")
+    return block.as_dict()
+
+
+def _friction(block: ParamBlock, d: _Draft) -> None:
+    p = _names("joint_friction", block, tuple(f"Fc{j}" for j in J) + tuple(f"Fv{j}" for j in J))
+    loss, damping = d.per_joint("frictionloss", (0.0,) * 7), d.per_joint("damping", d.nominal_damping)
+    for j in J:
+        fc, fv = p.get(f"Fc{j}", 0.0), p.get(f"Fv{j}", 0.0)
+        loss[j - 1] = max(fc, 0.0)
+        damping[j - 1] = max(d.nominal_damping[j - 1] + fv, 0.0)
+        if fc < 0:  # the fit admits negative values so that an absent effect is not biased
+            d.notes.append(f"joint_friction Fc{j} = {fc:.3g} N m < 0: applied as 0")
+        if d.nominal_damping[j - 1] + fv < 0:
+            d.notes.append(f"joint_friction Fv{j} = {fv:.3g} N m s/rad takes the damping below "
+                           "0: applied as 0")
+
+
+def _payload(block: ParamBlock, d: _Draft) -> None:
+    p = _names("payload", block, PAYLOAD)
+    missing = [n for n in PAYLOAD if n not in p]
+    if missing:
+        raise ConfigError(f"payload: parameter(s) {', '.join(missing)} missing; a body needs all "
+                          f"of {', '.join(PAYLOAD)}")
+    if p["mass"] <= 0:
+        d.notes.append(f"payload: fitted mass {p['mass']:.3g} kg <= 0, no body has it: not applied")
+        return
+    inertia = tuple(p[n] for n in PAYLOAD[4:])
+    why = inertia_problem(inertia)
+    if why:
+        d.notes.append(f"payload inertia not physical ({why}): applied as a point mass")
+        inertia = (POINT_MASS_INERTIA,) * 3 + (0.0,) * 3
+    d.fields["payload"] = PayloadBody(p["mass"], (p["com_x"], p["com_y"], p["com_z"]),
+                                      inertia)  # type: ignore[arg-type]
+
+
+def _links(block: ParamBlock, d: _Draft) -> None:
+    p = _names("link_inertia", block, tuple(f"link{j}" for j in J))
+    d.fields["link_mass_scale"] = [p.get(f"link{j}", 0.0) for j in J]
+
+
+def _offsets(block: ParamBlock, d: _Draft) -> None:
+    p = _names("encoder_offset", block, tuple(f"offset{j}" for j in J))
+    ref = d.per_joint("joint_ref", (0.0,) * 7)
+    for j in J:  # offset = measured - true = qpos - link angle = ref
+        ref[j - 1] += p.get(f"offset{j}", 0.0)
+
+
+def _encoder(block: ParamBlock, d: _Draft) -> None:
+    p = _names("encoder", block, tuple(f"o{j}" for j in J) + tuple(f"s{j}" for j in J))
+    ref = d.per_joint("joint_ref", (0.0,) * 7)
+    for j in J:  # link = q + o: the reading minus the link angle is -o
+        ref[j - 1] -= p.get(f"o{j}", 0.0)
+        if p.get(f"s{j}", 0.0):
+            d.notes.append(f"encoder s{j} = {p[f's{j}']:.3g}: a transmission-ratio error is not "
+                           "expressible (a MuJoCo hinge has no gear between reading and link)")
+
+
+def _geometric(block: ParamBlock, d: _Draft) -> None:
+    mdh = [[0.0] * len(MDH_PARAMS) for _ in J]
+    valid = tuple(f"j{j}.{k}" for j in J for k in MDH_PARAMS)
+    skipped = []
+    for name, value in block.as_dict().items():
+        frame = name.split(".")[0]
+        if frame in ("base", "tool"):
+            skipped.append(f"{name} = {value:.3g}")
+        elif name in valid:
+            mdh[int(frame[1:]) - 1][MDH_PARAMS.index(name.split(".")[1])] = value
+        else:
+            raise ConfigError(f"geometric: unknown parameter {name!r}; valid: j<1-7>."
+                              f"{{{','.join(MDH_PARAMS)}}}, base.*, tool.*")
+    if skipped:
+        d.notes.append(f"geometric {', '.join(skipped)}: the arm's mounting / the measuring tool's "
+                       "frame, not the arm (a rigid motion of the whole arm leaves point-"
+                       "consistency data unchanged): not applied")
+    d.fields["mdh_errors"] = tuple(tuple(r) for r in mdh)
+
+
+def _latency(block: ParamBlock, d: _Draft) -> None:
+    delay = _names("latency", block, ("delay",)).get("delay", 0.0)
+    if delay < 0:
+        d.notes.append(f"latency delay = {delay:.3g} s < 0 (a command cannot act early): "
+                       "not applied")
+    else:
+        d.fields["actuation_delay"] = delay
+
+
+APPLY: dict[str, Callable[[ParamBlock, _Draft], None]] = {
+    "joint_friction": _friction, "payload": _payload, "link_inertia": _links,
+    "encoder_offset": _offsets, "encoder": _encoder, "geometric": _geometric,
+    "latency": _latency,
+}
+KNOWN_EFFECTS: tuple[str, ...] = tuple(APPLY) + tuple(NOT_APPLICABLE)
+
+
+def _nominal_damping() -> tuple[float, ...]:
+    spec = build_arm_spec()  # the MJCF is the one source of the nominal damping
+    return tuple(float(spec.joint(n).damping[0]) for n in JOINT_NAMES)
+
+
+def arm_plant_changes(model: DiagnosisModel) -> ArmPlantChanges:
+    """The plant changes of a validated model file; ConfigError names an unknown effect or
+    parameter, or a value outside what the plant accepts."""
+    unknown = [e for e in model.effects if e not in KNOWN_EFFECTS]
+    if unknown:
+        raise ConfigError(f"{model.path}: unknown effect(s) {', '.join(unknown)}; valid: "
+                          f"{', '.join(KNOWN_EFFECTS)}")
+    d = _Draft(_nominal_damping())
+    try:
+        for effect in model.effects:
+            if effect in APPLY:
+                APPLY[effect](model.block(effect), d)
+            else:
+                d.notes.append(f"{effect}: not applicable to the plant: {NOT_APPLICABLE[effect]}")
+        for base in model.baseline_blocks:
+            d.notes.append(f"{base}: the recording's own baseline (refitted on every "
+                           "recording), not plant physics")
+        fields = {k: tuple(v) if isinstance(v, list) else v for k, v in d.fields.items()}
+        return ArmPlantChanges(**fields, source=model.path,  # type: ignore[arg-type]
+                               not_applied=tuple(d.notes))
+    except ConfigError as exc:
+        raise ConfigError(f"{model.path}: {exc}") from None
+
+
+def arm_plant_from_file(path: str | Path) -> ArmPlantChanges:
+    """Read, validate and map a model file (``EpisodeConfig.plant_model``)."""
+    return arm_plant_changes(read_model_file(path))
+
+
+def applied_parts(changes: ArmPlantChanges) -> list[str]:
+    """The parts of the plant that ``changes`` moves off nominal, in words."""
+    return [name for name, on in (
+        ("joint friction", bool(changes.frictionloss or changes.damping)),
+        ("payload body", changes.payload is not None),
+        ("link mass/inertia", bool(changes.link_mass_scale)),
+        ("encoder offsets (joint ref)", bool(changes.joint_ref)),
+        ("link frames (MD-H errors)", bool(changes.mdh_errors)),
+        ("actuation delay", changes.actuation_delay > 0)) if on]
+
+
+def plant_report(changes: ArmPlantChanges) -> list[str]:
+    """Lines for the user: what was applied, then one warning per thing that was not."""
+    lines = [f"plant model {changes.source}: applied {', '.join(applied_parts(changes)) or 'nothing'}"]
+    return lines + [f"warning: {note}" for note in changes.not_applied]

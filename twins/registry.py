@@ -1,0 +1,62 @@
+"""Registry of concealed-effect twins: effect name -> the domain module that makes it.
+
+Each domain module provides ``EFFECTS: tuple[str, ...]`` and
+``make_twin(effect: str | None, magnitude: float | None, seed: int) -> (Recording, answer)``,
+and optionally ``MAGNITUDE_RANGE: dict[str, (lo, hi)]`` (the blind bench's draw; default
+0.5-2 times the effect's default size).
+"""
+
+from __future__ import annotations
+
+import importlib
+from types import ModuleType
+
+from serpar.errors import ConfigError
+from serpar.sim.recording import Recording
+
+DOMAINS: dict[str, str] = {
+    "arm_static": "serpar.twins.arm_static_twin",
+    "arm_dynamics": "serpar.twins.arm_dynamics_twin",
+    "stewart": "serpar.twins.stewart_twin",
+    "stewart_motion": "serpar.twins.stewart_motion_twin",
+}
+DEFAULT_RANGE = (0.5, 2.0)
+
+
+def domain_module(domain: str) -> ModuleType:
+    if domain not in DOMAINS:
+        raise ConfigError(f"unknown twin domain {domain!r}; valid: {', '.join(DOMAINS)}")
+    return importlib.import_module(DOMAINS[domain])
+
+
+def effects() -> dict[str, str]:
+    """Every registered effect name -> its domain."""
+    out: dict[str, str] = {}
+    for domain in DOMAINS:
+        for name in domain_module(domain).EFFECTS:
+            out[name] = domain
+    return out
+
+
+def domain_of(effect: str | None, domain: str | None) -> str:
+    if effect is None:
+        return domain or "arm_static"
+    table = effects()
+    if effect not in table:
+        raise ConfigError(f"unknown effect {effect!r}; valid: none, {', '.join(table)}")
+    if domain is not None and table[effect] != domain:
+        raise ConfigError(f"effect {effect!r} belongs to domain {table[effect]!r}, not {domain!r}")
+    return table[effect]
+
+
+def magnitude_range(effect: str, domain: str) -> tuple[float, float]:
+    ranges = getattr(domain_module(domain), "MAGNITUDE_RANGE", {})
+    return tuple(ranges.get(effect, DEFAULT_RANGE))  # type: ignore[return-value]
+
+
+def make_twin(effect: str | None, magnitude: float | None, seed: int,
+              domain: str | None = None) -> tuple[Recording, dict[str, object]]:
+    """The recording of a "real" plant with ``effect`` (None: none) and the answer."""
+    dom = domain_of(effect, domain)
+    rec, answer = domain_module(dom).make_twin(effect, magnitude, seed)
+    return rec, {"domain": dom, **answer}
