@@ -24,6 +24,7 @@ import numpy as np
 import scipy.stats
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
+
 from serpar.calibration.arm_error_models import (
     ArmModel,
     Layout,

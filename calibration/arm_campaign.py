@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.calibration.arm_calibration import (
     ArmCalibration,
     ComplianceTest,

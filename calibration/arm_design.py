@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.calibration.arm_error_models import ArmModel, Layout, layout
 from serpar.errors import IdentificationError
 from serpar.kinematics.mdh import Chain, chain_frames, forward, pose_jacobian

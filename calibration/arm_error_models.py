@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
+
 from serpar.calibration.poe_calibration import PoeChain, poe_kinematics
 from serpar.errors import ConfigError, IdentificationError
 from serpar.kinematics.mdh import Chain, chain_frames, forward, pose_jacobian

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 from numpy.typing import NDArray
+
 from serpar.calibration.panda_data import SOCKET_DISTANCE_M, load_panda_folder
 from serpar.errors import IdentificationError
 from serpar.sim.arm import N_JOINTS

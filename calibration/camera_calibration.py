@@ -10,11 +10,13 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+
+from serpar.calibration.camera_truth import true_camera
 from serpar.calibration.camera_views import VOLUMES, take_views
 from serpar.errors import UnknownNameError
 from serpar.sim.calibration_board import BOARDS
 from serpar.sim.scene import SceneConfig, build_scene
-from serpar.vision.camera import CameraModel, StereoPair, true_camera
+from serpar.vision.camera import CameraModel, StereoPair
 from serpar.vision.checkerboard import draw_corners, find_corners
 from serpar.vision.errors import TargetNotFound
 from serpar.vision.imaging import Camera, ImagingConfig

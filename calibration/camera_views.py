@@ -15,6 +15,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
+
 from serpar.controllers.arm_model import NominalArm
 from serpar.errors import ConfigError
 from serpar.sim import names

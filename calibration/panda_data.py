@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import IdentificationError
 from serpar.sim.arm import N_JOINTS
 from serpar.sim.arm_measurements import PointSet

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import ConfigError
 from serpar.kinematics.mdh import FRAME_PARAMS, elementary
 from serpar.kinematics.poe import adjoint, exp_twist, se3_left_jacobian, skew

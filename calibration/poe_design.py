@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.calibration.arm_design import IK_TOL_M, PER_SOCKET, consistent_sockets, generic_design
 from serpar.calibration.arm_error_models import ArmModel, chain_forward, chain_kinematics, layout
 from serpar.calibration.poe_calibration import PoeChain

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
 from serpar.calibration.stewart_campaign import (
     CampaignResult,
     MocapNoise,

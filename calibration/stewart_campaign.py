@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
 from serpar.calibration.stewart_identification import (
     StewartIdentification,
     StewartMeasurements,

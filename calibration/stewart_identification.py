@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
+
 from serpar.errors import IdentificationError
 from serpar.kinematics.stewart_kinematics import StewartGeometry
 from serpar.sim.stewart import MAX_JOINT_ERROR

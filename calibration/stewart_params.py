@@ -8,6 +8,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+
 from serpar.errors import ConfigError
 from serpar.sim.stewart import MAX_JOINT_ERROR
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
 from serpar.assets import asset_path
 from serpar.calibration.stewart_identification import (
     MIN_POSES,

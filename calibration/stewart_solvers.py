@@ -16,6 +16,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+
 from serpar.calibration.stewart_identification import (
     N_LEGS,
     N_PARAMS,

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
 from serpar.calibration.camera_cache import calibrated_pair
 from serpar.calibration.stewart_campaign import SETTLE_S, CampaignCell, CampaignResult, random_poses
 from serpar.calibration.stewart_identification import StewartMeasurements

@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
 from serpar.errors import ConfigError
 from serpar.tasks.episode_config import N_HOLES, EpisodeConfig
 from serpar.tasks.run_episodes import Record, RunSummary, episode_configs, run_many, summarise

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
+
 from serpar.controllers.arm_controller import ArmController, ControlLaw, controller_config
 from serpar.controllers.arm_laws import CartesianTarget, ForceTarget
 from serpar.controllers.trajectory import LineMove, min_jerk

@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
+
 from serpar.checks.arm_checks import DOWN, press_setup
 from serpar.controllers.arm_controller import ArmController, ControlLaw, controller_config
 from serpar.controllers.arm_laws import CartesianTarget, ForceTarget

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
 from serpar.diagnosis.choose import family_from_recording
 from serpar.diagnosis.select import diagnose
 from serpar.errors import ConfigError

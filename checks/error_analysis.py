@@ -24,6 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from serpar.checks.tool_changer_robot import (
     PAPER_ANGLE_THRESHOLD_RAD,
     PAPER_POSITION_RELIABILITY,

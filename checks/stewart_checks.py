@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 
 import mujoco
 import numpy as np
+
 from serpar.checks.workspace import WorkspaceBox, pose_rotations, sample_poses
 from serpar.controllers.stewart_servo import StewartServo
 from serpar.errors import ConfigError

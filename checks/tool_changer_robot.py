@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
 from serpar.errors import ConfigError, IdentificationError
 from serpar.kinematics import poe
 

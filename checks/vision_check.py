@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
 from serpar.calibration.camera_calibration import CalibrationRun, calibrate
 from serpar.checks.vision_inhand_scenes import (
     measured_tcp,

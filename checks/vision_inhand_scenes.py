@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
+from serpar.calibration.camera_truth import true_camera
 from serpar.controllers.arm_model import NominalArm
 from serpar.errors import ConfigError
 from serpar.sim import names
@@ -20,7 +22,7 @@ from serpar.sim.arm import FINGER_JOINT_NAMES, TCP_SITE
 from serpar.sim.arm_drive import quantise
 from serpar.sim.poses import GRASP_HEIGHT, pose_inspect, solve_tcp_pose
 from serpar.sim.scene import Scene
-from serpar.vision.camera import StereoPair, true_camera
+from serpar.vision.camera import StereoPair
 
 Vec = NDArray[np.float64]
 PAD_HALF_HEIGHT = 0.004

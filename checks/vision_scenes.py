@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
 from serpar.controllers.stewart_servo import StewartServo
 from serpar.errors import ConfigError
 from serpar.kinematics.rotations import euler_to_rot

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
 from serpar.errors import ConfigError
 from serpar.kinematics.rotations import euler_to_rot
 from serpar.kinematics.stewart_kinematics import (

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
 from serpar.errors import ConfigError
 
 MAX_3D_POINTS = 40_000

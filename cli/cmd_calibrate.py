@@ -7,6 +7,7 @@ import argparse
 import sys
 
 import numpy as np
+
 from serpar.calibration.stewart_calibration import (
     SOLVERS,
     StewartCalibrationConfig,

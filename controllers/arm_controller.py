@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.controllers.arm_laws import (
     CartesianTarget,
     ForcePositionGains,

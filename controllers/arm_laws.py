@@ -13,6 +13,7 @@ from functools import cached_property
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.controllers.arm_model import NominalArm
 from serpar.errors import ConfigError
 from serpar.sim.arm import HOME_Q, N_JOINTS

@@ -12,6 +12,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import ConfigError, LimitError
 from serpar.sim.arm import (
     N_JOINTS,

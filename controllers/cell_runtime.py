@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
+
 from serpar.controllers.arm_controller import ArmController, ArmControllerConfig
 from serpar.controllers.stewart_servo import StewartServo
 from serpar.errors import UnstableSimulation

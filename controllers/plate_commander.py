@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
+
 from serpar.controllers.arm_laws import orientation_error
 from serpar.controllers.stewart_servo import StewartServo
 from serpar.kinematics.rotations import so3_exp

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
 from serpar.errors import ConfigError, LimitError
 from serpar.kinematics.rotations import quat_to_rot
 from serpar.kinematics.stewart_kinematics import (

@@ -8,6 +8,7 @@ from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.controllers.arm_laws import CartesianTarget, orientation_error
 from serpar.errors import ConfigError
 from serpar.kinematics.rotations import so3_exp

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.controllers.arm_model import NominalArm
 from serpar.errors import ConfigError
 

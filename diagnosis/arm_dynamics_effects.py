@@ -25,6 +25,7 @@ from collections.abc import Mapping
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.family import Effect
 from serpar.sim.rigid_arm import (

@@ -16,6 +16,7 @@ from itertools import pairwise
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.diagnosis.arm_dynamics_effects import BASELINE, EFFECTS, EffectModels
 from serpar.diagnosis.arm_dynamics_signals import SmoothingConfig, read_arm_series
 from serpar.diagnosis.arm_dynamics_terms import Terms, compute_terms, row_sigma

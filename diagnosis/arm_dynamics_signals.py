@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal
 from numpy.typing import NDArray
+
 from serpar.errors import IdentificationError
 from serpar.sim import channels as ch
 from serpar.sim.arm import Q_MAX, Q_MIN

@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import BSpline, make_interp_spline
 from scipy.ndimage import correlate1d
+
 from serpar.diagnosis.arm_dynamics_signals import (
     ArmSeries,
     Rows,

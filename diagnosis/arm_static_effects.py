@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
+
 from serpar.calibration.arm_error_models import PREFERENCE
 from serpar.diagnosis.family import Effect
 

@@ -19,6 +19,7 @@ from collections.abc import Mapping
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.calibration.arm_static_data import StaticArmData
 from serpar.diagnosis.arm_static_effects import candidate_effects, chain_rank, independent_columns
 from serpar.diagnosis.arm_static_model import (

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.kinematics.mdh import Chain, elementary
 
 STEP_WIDTH_NM = 0.005

@@ -27,6 +27,7 @@ from collections.abc import Mapping
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.diagnosis.arm_dynamics_family import ArmDynamicsConfig, ArmDynamicsFamily
 from serpar.diagnosis.arm_dynamics_family import family_from_recording as dynamics_family
 from serpar.diagnosis.family import Effect, LocateRow

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
+
 from serpar.diagnosis.family import Effect, Family
 from serpar.errors import IdentificationError
 

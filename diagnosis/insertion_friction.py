@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.diagnosis.family import Effect
 from serpar.sim import channels as ch
 from serpar.sim.physics import PhysicsConfig

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.stats
 from numpy.typing import NDArray
+
 from serpar.diagnosis.family import LocateRow
 
 ALPHA = 0.01

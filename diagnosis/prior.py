@@ -15,6 +15,7 @@ from collections.abc import Mapping
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.diagnosis.family import Effect, Family, LocateRow
 from serpar.diagnosis.select import SelectConfig
 from serpar.errors import IdentificationError

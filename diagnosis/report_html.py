@@ -12,6 +12,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+
 from serpar.diagnosis.family import LocateRow, export_model_files
 from serpar.diagnosis.result import Diagnosis
 

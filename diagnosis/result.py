@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.diagnosis.family import LocateRow
 
 NO_MISSING_PHYSICS = "no missing physics found beyond noise"

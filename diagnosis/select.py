@@ -24,6 +24,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
+
 from serpar.diagnosis.family import Family
 from serpar.diagnosis.fit import Fit, blocks_of, fit_model
 from serpar.diagnosis.locate import chi2_p
@@ -35,7 +37,6 @@ from serpar.diagnosis.result import (
     ParamEstimate,
 )
 from serpar.errors import IdentificationError
-from threadpoolctl import threadpool_limits
 
 Progress = Callable[[str], None]
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import IdentificationError
 from serpar.kinematics.rotations import quat_to_rot
 from serpar.sim import channels as ch

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.diagnosis.arm_static_effects import independent_columns
 from serpar.diagnosis.family import Effect
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.calibration.stewart_params import save_stewart_parameters
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.diagnosis.family import Effect
 from serpar.diagnosis.stewart_data import (
     CMDS,

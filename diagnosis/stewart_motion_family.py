@@ -26,6 +26,7 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
+
 from serpar.diagnosis.arm_static_effects import independent_columns
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import ConfigError
 from serpar.kinematics.panda import FLANGE_D, MDH_A, MDH_ALPHA, MDH_D, N_JOINTS
 

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import ConfigError
 
 N_JOINTS = 7

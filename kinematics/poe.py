@@ -18,6 +18,7 @@ from math import factorial
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import expm
+
 from serpar.errors import IdentificationError
 
 Array = NDArray[np.float64]

@@ -34,6 +34,7 @@ from functools import cached_property
 from typing import Literal
 
 import numpy as np
+
 from serpar.errors import ConfigError, LimitError
 from serpar.kinematics.rotations import so3_exp
 

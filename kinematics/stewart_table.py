@@ -11,6 +11,7 @@ import csv
 from functools import lru_cache
 
 import numpy as np
+
 from serpar.assets import asset_path
 from serpar.errors import ConfigError
 from serpar.kinematics.stewart_kinematics import N_LEGS, StewartGeometry

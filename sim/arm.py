@@ -10,6 +10,7 @@ Panda recordings line up with the model; the MJCF body frames coincide with thes
 from __future__ import annotations
 
 import mujoco
+
 from serpar.assets import asset_path
 from serpar.kinematics.panda import (  # noqa: F401  (the arm's numbers, read through here by sim)
     FLANGE_D,

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import ConfigError
 from serpar.sim.arm import (
     ACTUATOR_NAMES,

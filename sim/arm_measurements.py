@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import IdentificationError
 from serpar.sim.arm import N_JOINTS, Q_MAX, Q_MIN
 

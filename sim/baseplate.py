@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
 from serpar.errors import ConfigError
 from serpar.sim import collision
 from serpar.sim.holes import BoreGeometry, add_bore, add_grid_plate, grid_centres

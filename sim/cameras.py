@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
 from serpar.errors import ConfigError
 
 SENSOR_PIXELS = (2048, 1536)

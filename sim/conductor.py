@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
 from serpar.errors import ConfigError
 from serpar.sim import collision
 from serpar.sim.physics import PhysicsConfig

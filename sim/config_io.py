@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
+
 from serpar.errors import ConfigError
 
 T = TypeVar("T")

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+
 from serpar.sim.channels import MEASUREMENT_HELP, MEASUREMENT_OPTIONAL, MEASUREMENT_REQUIRED
 from serpar.sim.recording import Recording, RecordingError, RecordingMeta, check_channels
 

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
 from serpar.errors import ConfigError
 
 GeomHook = Callable[[mujoco.MjsGeom], None]

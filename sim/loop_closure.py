@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+
 from serpar.sim import names
 from serpar.sim.physics import PhysicsConfig, wake_tree_of
 from serpar.sim.scene import SceneConfig, build_scene

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import mujoco
+
 from serpar.errors import ConfigError
 
 

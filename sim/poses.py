@@ -10,6 +10,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 from scipy.optimize import least_squares
+
 from serpar.errors import ConfigError, UnknownNameError
 from serpar.sim import names
 from serpar.sim.arm import FINGER_JOINT_NAMES, Q_MAX, Q_MIN, TCP_SITE

@@ -16,6 +16,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
+
 from serpar.errors import SerparError
 from serpar.sim.channels import KNOWN_HELP, TIME, is_channel
 

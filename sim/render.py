@@ -6,6 +6,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+
 from serpar.errors import ConfigError, UnknownNameError
 from serpar.sim.cameras import SENSOR_PIXELS
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
 from serpar.errors import ConfigError
 from serpar.sim.baseplate import BaseplateConfig, build_baseplate_spec
 from serpar.sim.conductor import ConductorConfig, add_conductor_geoms

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import IdentificationError
 from serpar.sim.arm import JOINT_NAMES, N_JOINTS, build_arm_spec
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
+
 from serpar.errors import ConfigError, SerparError
 from serpar.sim import names
 from serpar.sim.arm import ACTUATOR_NAMES, HOME_Q, JOINT_NAMES, PAD_GEOMS, build_arm_spec

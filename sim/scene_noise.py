@@ -6,6 +6,7 @@ from collections.abc import Callable
 
 import mujoco
 import numpy as np
+
 from serpar.errors import UnknownNameError
 from serpar.sim.arm import build_arm_spec
 from serpar.sim.physics import PhysicsConfig

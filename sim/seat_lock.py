@@ -2,9 +2,9 @@
 
 A journal seated in its H7/h6 bore, shoulder on the plate top, is held by the fit and by
 gravity; nothing in the cell pushes it again. Simulated as a free body, though, each seated
-part rides in the Stewart platform's island: with its contacts it cost ~0.3 ms per step, and
-welded to the plate (an equality constraint, serpar before session 14) still 12 us per step
-per part, mostly in MuJoCo's no-slip pass, which works on every constraint row of the awake
+part rides in the Stewart platform's island: with its contacts it costs ~0.3 ms per step, and
+welded to the plate (an equality constraint) still 12 us per step per part, mostly in
+MuJoCo's no-slip pass, which works on every constraint row of the awake
 island: with 36 welded parts a control period cost 5.4 ms against 1.1 ms for the bare
 platform moving (measured, 5 mm platform ramp).
 
@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
+
 from serpar.errors import SerparError
 from serpar.sim import names
 

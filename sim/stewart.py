@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
 from serpar.errors import ConfigError
 from serpar.kinematics.rotations import quat_to_rot
 from serpar.kinematics.stewart_kinematics import (

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import IdentificationError
 from serpar.sim.stewart import StewartConfig, build_stewart_spec
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+
 from serpar.errors import ConfigError
 
 Distribution = Literal["uniform", "normal"]

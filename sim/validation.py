@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass
 
 import mujoco
 import numpy as np
+
 from serpar.errors import UnknownNameError
 from serpar.sim.loop_closure import loop_hold_and_stroke
 from serpar.sim.physics import PhysicsConfig

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+
 from serpar.controllers.arm_controller import ControlLaw, controller_config
 from serpar.controllers.cell_runtime import CellRuntime
 from serpar.controllers.plate_commander import PlateCommander

@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from serpar.errors import ConfigError
 from serpar.kinematics.stewart_table import table5_errors
 from serpar.sim.arm import PANDA_COULOMB_FRICTION

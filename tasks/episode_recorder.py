@@ -17,6 +17,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+
 from serpar.controllers.cell_runtime import CellRuntime
 from serpar.sim import channels as ch
 from serpar.sim.contact import ContactForceProbe

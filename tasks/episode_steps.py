@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
 from serpar.controllers.arm_controller import ControlLaw
 from serpar.controllers.cell_runtime import CellRuntime
 from serpar.controllers.plate_commander import PlateCommander, inverse

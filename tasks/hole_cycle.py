@@ -11,6 +11,7 @@ CLEAR_Z, above everything on the plate and the tray, then travel level.
 from __future__ import annotations
 
 import numpy as np
+
 from serpar.controllers.cell_runtime import CellRuntime
 from serpar.kinematics.rotations import so3_exp
 from serpar.sim.poses import GRASP_HEIGHT

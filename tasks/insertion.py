@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
 from serpar.controllers.arm_controller import ControlLaw
 from serpar.controllers.arm_laws import CartesianTarget, ForceTarget
 from serpar.controllers.cell_runtime import CellRuntime

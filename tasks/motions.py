@@ -7,6 +7,7 @@ at the measured joints); nothing here reads the simulator's true state.
 from __future__ import annotations
 
 import numpy as np
+
 from serpar.controllers.arm_controller import ControlLaw
 from serpar.controllers.arm_laws import CartesianTarget, orientation_error
 from serpar.controllers.cell_runtime import CellRuntime

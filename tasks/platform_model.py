@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
+
 from serpar.calibration.camera_cache import cache_dir
 from serpar.calibration.stewart_campaign import N_POSES, MocapNoise, calibrate
 from serpar.calibration.stewart_params import load_stewart_parameters, save_stewart_parameters

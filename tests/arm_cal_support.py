@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+
 from serpar.calibration.arm_calibration import calibrate, identifiability_of
 from serpar.calibration.arm_error_models import (
     ArmModel,

@@ -1,6 +1,7 @@
 # MuJoCo picks its GL backend when first imported and tests import mujoco directly:
 # importing serpar first applies the package's headless default (MUJOCO_GL=egl when unset).
 import pytest
+
 import serpar  # noqa: F401
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 
 import numpy as np
+
 from serpar.diagnosis.choose import family_from_recording
 from serpar.diagnosis.select import diagnose
 

@@ -15,6 +15,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from serpar.checks.ablation import ablation_arms
 from serpar.sim import names
 from serpar.sim.seat_lock import PLATE_BODY, is_locked

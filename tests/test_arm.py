@@ -7,6 +7,7 @@ import math
 import mujoco
 import numpy as np
 import pytest
+
 from serpar.errors import ConfigError
 from serpar.sim import arm
 from serpar.sim.physics import PhysicsConfig

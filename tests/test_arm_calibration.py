@@ -19,6 +19,7 @@ from arm_cal_support import (
     position_set,
     truth,
 )
+
 from serpar.calibration.arm_calibration import (
     calibrate,
     calibrate_gravity_aware,

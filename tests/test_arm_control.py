@@ -8,6 +8,7 @@ import json
 import mujoco
 import numpy as np
 import pytest
+
 from serpar.checks.arm_checks import force_position_descent, path_accuracy, press
 from serpar.cli.entry import main
 from serpar.controllers.arm_controller import ArmController, ArmControllerConfig, ControlLaw

@@ -4,6 +4,7 @@ speed is the benchmark's job, not a test's)."""
 from __future__ import annotations
 
 import pytest
+
 from serpar.checks.bench import BenchConfig, in_contact
 from serpar.errors import ConfigError
 

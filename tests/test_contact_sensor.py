@@ -3,6 +3,7 @@ reads the same force as summing the contacts by hand."""
 
 import mujoco
 import numpy as np
+
 from serpar.checks.arm_checks import DOWN, press_setup
 from serpar.controllers.arm_controller import ControlLaw
 from serpar.controllers.arm_laws import CartesianTarget, ForceTarget

@@ -13,6 +13,7 @@ import json
 import numpy as np
 import pyarrow as pa
 import pytest
+
 from serpar.diagnosis.arm_dynamics_effects import EffectModels, _payload_model, _set_payload
 from serpar.diagnosis.arm_dynamics_family import CHANNELS, family_from_recording
 from serpar.diagnosis.family import Family

@@ -9,6 +9,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 from diagnosis_support import RMS_TARGET, assert_jacobian_matches_differences, run_trials
+
 from serpar.calibration.arm_static_data import static_data, to_recording
 from serpar.diagnosis.arm_static_family import family_from_data
 from serpar.diagnosis.choose import family_from_recording

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from serpar.cli.entry import main
 from serpar.sim.csv_import import import_csv, parse_map
 from serpar.sim.recording import RecordingError

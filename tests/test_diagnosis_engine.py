@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from serpar.diagnosis import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows
 from serpar.diagnosis.select import SelectConfig, diagnose

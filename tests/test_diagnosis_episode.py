@@ -11,6 +11,7 @@ import dataclasses
 import numpy as np
 import pytest
 from diagnosis_support import RMS_TARGET
+
 from serpar.diagnosis.choose import family_from_recording
 from serpar.diagnosis.config_model import model_from_episode_config
 from serpar.diagnosis.episode_family import EpisodeFamily, free_windows

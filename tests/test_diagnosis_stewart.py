@@ -11,6 +11,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 from diagnosis_support import RMS_TARGET, assert_jacobian_matches_differences, run_trials
+
 from serpar.calibration.stewart_campaign import random_poses
 from serpar.calibration.stewart_params import load_stewart_parameters
 from serpar.cli.entry import main

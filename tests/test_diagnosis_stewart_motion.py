@@ -12,6 +12,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 from diagnosis_support import RMS_TARGET, assert_jacobian_matches_differences, run_trials
+
 from serpar.diagnosis.choose import family_from_recording
 from serpar.diagnosis.family import Family
 from serpar.diagnosis.fit import fit_model

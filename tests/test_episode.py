@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+
 from serpar.controllers.plate_commander import rotation_between
 from serpar.errors import ConfigError
 from serpar.tasks.episode import run_episode

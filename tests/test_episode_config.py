@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from serpar.errors import ConfigError
 from serpar.sim.config_io import load_yaml_config
 from serpar.tasks.episode_config import (

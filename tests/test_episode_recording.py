@@ -8,6 +8,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from serpar.checks.vision_scenes import seat_conductor
 from serpar.sim.recording import check_channels, read_recording
 from serpar.sim.seat_lock import lock_seated

@@ -15,6 +15,7 @@ import mujoco
 import numpy as np
 import pytest
 from scipy.linalg import expm
+
 from serpar.checks import tool_changer_robot as s1
 from serpar.checks.error_analysis import (
     ErrorAnalysisConfig,

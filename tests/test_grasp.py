@@ -3,6 +3,7 @@ sliding in the pads; an unstable integration is caught and named."""
 
 import numpy as np
 import pytest
+
 from serpar.checks.vision_inhand_scenes import true_in_hand
 from serpar.controllers.arm_controller import controller_config
 from serpar.controllers.cell_runtime import CellRuntime

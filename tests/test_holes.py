@@ -5,6 +5,7 @@ import math
 import mujoco
 import numpy as np
 import pytest
+
 from serpar.errors import ConfigError
 from serpar.sim.holes import BoreGeometry
 from serpar.sim.rig import RigConfig, build_rig

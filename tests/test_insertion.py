@@ -4,6 +4,7 @@ from the simulator's truth."""
 
 import numpy as np
 import pytest
+
 from serpar.controllers.arm_controller import ControlLaw, controller_config
 from serpar.controllers.cell_runtime import CellRuntime
 from serpar.errors import ConfigError

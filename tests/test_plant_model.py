@@ -10,6 +10,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+
 from serpar.cli.entry import main
 from serpar.errors import ConfigError
 from serpar.kinematics.mdh import forward, panda_chain

@@ -3,6 +3,7 @@ follower that keeps a hole under a journal wandering sideways (all from the mode
 
 import numpy as np
 import pytest
+
 from serpar.controllers.plate_commander import PlateCommander, transform
 from serpar.sim.scene import SceneConfig, build_scene
 from serpar.tasks.episode_steps import HoleUnderJournal

@@ -6,10 +6,11 @@
 import mujoco
 import numpy as np
 import pytest
+
+from serpar.calibration.camera_truth import true_camera
 from serpar.controllers.plate_commander import transform
 from serpar.sim.scene import SceneConfig, build_scene
 from serpar.tasks.episode_steps import STATION_ENTRY, TOP
-from serpar.vision.camera import true_camera
 from serpar.vision.imaging import ImagingConfig
 from serpar.vision.layout import plate_in_view, plate_layout
 

@@ -26,6 +26,7 @@ from arm_cal_support import (
     position_set,
     truth,
 )
+
 from serpar.calibration.arm_calibration import calibrate, identifiability_of
 from serpar.calibration.arm_campaign import real_data_calibration, simulated_calibration
 from serpar.calibration.arm_error_models import (

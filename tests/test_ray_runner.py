@@ -13,6 +13,7 @@ import sys
 import time
 
 import pytest
+
 from serpar.errors import ConfigError
 from serpar.tasks.episode_config import EpisodeConfig
 from serpar.tasks.run_episodes import run_many, summarise

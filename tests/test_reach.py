@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from serpar.sim.poses import solve_tcp_pose
 from serpar.sim.scene import SceneConfig, build_scene
 

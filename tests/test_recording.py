@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pyarrow as pa
 import pytest
+
 from serpar.sim.recording import (
     PhaseSegment,
     Recording,

@@ -3,6 +3,7 @@
 import mujoco
 import numpy as np
 import pytest
+
 from serpar.errors import ConfigError
 from serpar.sim import names
 from serpar.sim.info import scene_info

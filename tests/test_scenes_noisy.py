@@ -1,6 +1,7 @@
 """Check 4 (menagerie's model test): every scene, stepped 2 s with noisy control, stays clean."""
 
 import pytest
+
 from serpar.sim.scene_noise import NOISY_SCENES, step_with_noise
 
 

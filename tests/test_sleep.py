@@ -7,6 +7,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+
 from serpar.checks.vision_scenes import seat_conductor
 from serpar.controllers.stewart_servo import StewartServo
 from serpar.sim import names

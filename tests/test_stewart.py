@@ -5,6 +5,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+
 from serpar.errors import ConfigError
 from serpar.sim.physics import PhysicsConfig, wake_tree_of
 from serpar.sim.stewart import (

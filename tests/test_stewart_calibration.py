@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from serpar.calibration.stewart_calibration import (
     SEED000_BOX,
     StewartCalibrationConfig,

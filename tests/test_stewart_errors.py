@@ -4,6 +4,7 @@ kinematics say, not where its nominal model was commanded to."""
 import mujoco
 import numpy as np
 import pytest
+
 from serpar.controllers.stewart_servo import StewartServo, platform_pose
 from serpar.errors import ConfigError
 from serpar.kinematics.stewart_kinematics import forward_kinematics

@@ -4,6 +4,7 @@ simulated motion-capture campaign whose identified model cuts the platform's mov
 
 import numpy as np
 import pytest
+
 from serpar.calibration.stewart_campaign import MocapNoise, measure, random_poses
 from serpar.calibration.stewart_identification import (
     StewartMeasurements,

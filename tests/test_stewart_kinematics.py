@@ -6,6 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+
 from serpar.checks.stewart_checks import ik_fk_round_trip, valid_poses
 from serpar.errors import ConfigError, LimitError
 from serpar.kinematics.rotations import euler_to_rot, quat_to_rot, rotation_angle, so3_exp

@@ -7,6 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+
 from serpar.calibration.stewart_params import save_stewart_parameters
 from serpar.errors import ConfigError
 from serpar.tasks import platform_model as stewart_model

@@ -5,6 +5,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+
 from serpar.checks.stewart_checks import commanded_vs_simulated
 from serpar.controllers.stewart_servo import StewartServo, platform_pose
 from serpar.errors import ConfigError, LimitError

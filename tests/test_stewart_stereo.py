@@ -15,6 +15,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from serpar.calibration.stewart_calibration import (
     StewartCalibrationConfig,
     measured_noise,

@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+
 from serpar.errors import ConfigError
 from serpar.sim.tolerances import HOLE_H7, JOURNAL_H6, draw_diameters
 

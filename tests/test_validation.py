@@ -1,6 +1,7 @@
 """The five physical validation checks of the foundation issue, asserted at their limits."""
 
 import pytest
+
 from serpar.errors import UnknownNameError
 from serpar.sim.physics import PhysicsConfig
 from serpar.sim.validation import (

@@ -8,12 +8,13 @@ import cv2
 import mujoco
 import numpy as np
 import pytest
+
+from serpar.calibration.camera_truth import true_camera
 from serpar.calibration.camera_views import INSPECT_VOLUME, board_poses
 from serpar.sim.calibration_board import INSPECT_BOARD, TOP_BOARD
 from serpar.sim.cameras import INSPECT_PAIR
 from serpar.sim.poses import solve_tcp_pose
 from serpar.sim.scene import SceneConfig, build_scene
-from serpar.vision.camera import true_camera
 from serpar.vision.checkerboard import find_corners
 from serpar.vision.errors import CalibrationError, ImageError, TargetNotFound
 from serpar.vision.imaging import Camera, ImagingConfig

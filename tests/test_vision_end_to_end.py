@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from serpar.checks.vision_inhand_scenes import (
     measured_tcp,
     pose_inspect_with_error,

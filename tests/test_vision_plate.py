@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 import pytest
+
+from serpar.calibration.camera_truth import true_camera
 from serpar.checks.vision_scenes import (
     make_scene,
     random_offset,
@@ -21,7 +23,7 @@ from serpar.checks.vision_scenes import (
     truth_holes,
 )
 from serpar.sim.scene import Scene, SceneConfig
-from serpar.vision.camera import StereoPair, true_camera
+from serpar.vision.camera import StereoPair
 from serpar.vision.errors import ConductorNotInView, HoleNotVisible, ImageError, PlateNotFound
 from serpar.vision.imaging import Camera, ImagingConfig
 from serpar.vision.layout import plate_layout, tray_pockets, tray_region

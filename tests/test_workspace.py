@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+
 from serpar.checks.workspace import l_min_scan, workspace_monte_carlo
 from serpar.checks.workspace_plot import plot_workspace
 from serpar.cli.cmd_workspace import register

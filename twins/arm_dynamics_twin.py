@@ -26,6 +26,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pyarrow as pa
+
 from serpar.errors import ConfigError
 from serpar.sim import channels as ch
 from serpar.sim.arm import JOINT_NAMES, N_JOINTS, PANDA_COULOMB_FRICTION

@@ -32,6 +32,7 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.calibration.arm_static_data import StaticArmData, to_recording
 from serpar.errors import ConfigError
 from serpar.sim.arm import LINK_NAMES, N_JOINTS, Q_MAX, Q_MIN

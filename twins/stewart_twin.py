@@ -36,6 +36,7 @@ import numpy as np
 import pyarrow as pa
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
+
 from serpar.calibration.stewart_campaign import MocapNoise, random_poses
 from serpar.errors import ConfigError
 from serpar.kinematics.stewart_kinematics import inverse_kinematics

@@ -2,7 +2,8 @@
 integer coordinates), posed in the arm base frame, and the stereo pair that triangulates.
 
 A :class:`CameraModel` is what calibration produces and what every detector uses. The
-true model of a simulated camera (:func:`true_camera`) exists only to score calibration.
+true model of a simulated camera (:func:`serpar.calibration.camera_truth.true_camera`) lives
+above vision: it exists only to score calibration and vision against.
 """
 
 from __future__ import annotations
@@ -10,13 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import cv2
-import mujoco
 import numpy as np
 from numpy.typing import NDArray
-from serpar.vision.errors import ImageError
 
-_MJ_TO_CV = np.diag([1.0, -1.0, -1.0])
-"""MuJoCo cameras look along -z with y up; OpenCV cameras look along +z with y down."""
+from serpar.vision.errors import ImageError
 
 
 @dataclass(frozen=True)
@@ -100,20 +98,6 @@ class CameraModel:
             raise ImageError(f"camera {self.name}: image is {image.shape[1]}x{image.shape[0]}, "
                              f"the camera model is {self.size[0]}x{self.size[1]}")
         return image
-
-
-def true_camera(model: mujoco.MjModel, data: mujoco.MjData, name: str,
-                size: tuple[int, int] | None = None) -> CameraModel:
-    """The simulator's exact camera (for scoring only): no distortion, centred principal point."""
-    cam = model.camera(name)
-    full = tuple(int(v) for v in model.cam_resolution[cam.id])
-    w, h = size or full
-    sensor = model.cam_sensorsize[cam.id]
-    f = model.cam_intrinsic[cam.id][:2]
-    fx, fy = f[0] / sensor[0] * w, f[1] / sensor[1] * h
-    K = np.array([[fx, 0, (w - 1) / 2], [0, fy, (h - 1) / 2], [0, 0, 1.0]])
-    rot = data.cam_xmat[cam.id].reshape(3, 3) @ _MJ_TO_CV
-    return CameraModel(name, (w, h), K, np.zeros(5), rot, data.cam_xpos[cam.id].copy())
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.sim.calibration_board import CheckerboardConfig
 from serpar.vision.errors import TargetNotFound
 

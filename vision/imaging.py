@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import cv2
 import mujoco
 import numpy as np
+
 from serpar.errors import ConfigError
 from serpar.sim.cameras import SENSOR_PIXELS
 from serpar.sim.render import CameraRenderer

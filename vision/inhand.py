@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
+
 from serpar.sim.conductor import ConductorConfig
 from serpar.sim.tolerances import BODY_H6, JOURNAL_H6
 from serpar.vision.camera import CameraModel, StereoPair

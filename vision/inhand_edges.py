@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.sim.conductor import ConductorConfig
 from serpar.sim.tolerances import BODY_H6, JOURNAL_H6
 from serpar.vision.camera import CameraModel

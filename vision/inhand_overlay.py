@@ -5,6 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.vision.camera import CameraModel
 from serpar.vision.inhand import InHandMeasurement
 

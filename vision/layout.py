@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.sim.baseplate import BaseplateConfig
 from serpar.sim.scene import SceneConfig
 from serpar.vision.camera import CameraModel

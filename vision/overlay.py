@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.sim.baseplate import BaseplateConfig
 from serpar.vision.camera import CameraModel
 from serpar.vision.plate import NOMINAL_PLATE, PlateMeasurement

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
+
 from serpar.sim.baseplate import BaseplateConfig
 from serpar.sim.conductor import ConductorConfig
 from serpar.sim.scene import SceneConfig

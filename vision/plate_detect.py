@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.vision.camera import CameraModel
 from serpar.vision.tray_conductors import BrassConfig, grey, soft_centroid
 

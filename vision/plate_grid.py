@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.sim.baseplate import BaseplateConfig
 from serpar.vision.errors import PlateNotFound
 

@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
+
 from serpar.sim.calibration_board import CheckerboardConfig
 from serpar.vision.camera import CameraModel, StereoPair
 from serpar.vision.errors import CalibrationError

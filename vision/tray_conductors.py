@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
+
 from serpar.sim.conductor import ConductorConfig
 from serpar.sim.scene import SceneConfig
 from serpar.sim.tolerances import BODY_H6

@@ -7,11 +7,11 @@ load the friction holds to the trailing side, a link that gravity loads beyond t
 in the approach direction runs ahead to the leading side, and MuJoCo integrates gravity, the
 gearbox friction and the stiff limit constraints until the arm is at rest.
 
-Until session 15 every link was released at once from the trailing side with the motors
-still: the links that gravity carried across their clearance struck the far end together,
-and the jolt moved a few sub-threshold links off their side, which no static model can
-follow (held-out RMS 1.8-2.4x the noise on seeds 0-3). With the dragging approach the same
-seeds give 1.01-1.72x (``tests/test_diagnosis_arm_static.py`` and the issue-7 note).
+Releasing every link at once from the trailing side with the motors still would let the
+links that gravity carries across their clearance strike the far end together, and the jolt
+moves a few sub-threshold links off their side, which no static model can follow (held-out
+RMS 1.8-2.4x the noise on seeds 0-3, against 1.01-1.72x with the dragging approach;
+``tests/test_diagnosis_arm_static.py``).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import copy
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import ConfigError
 from serpar.sim.arm import JOINT_NAMES
 from serpar.sim.physics import PhysicsConfig

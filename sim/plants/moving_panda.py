@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import ConfigError
 from serpar.sim.arm import N_JOINTS, Q_MAX, Q_MIN
 from serpar.sim.arm_drive import ArmIndex, quantise, saturate_torque

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import ConfigError
 from serpar.kinematics.mdh import Chain, panda_chain
 from serpar.sim.arm import (

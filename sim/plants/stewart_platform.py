@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
 from serpar.errors import ConfigError, UnstableSimulation
 from serpar.kinematics.stewart_kinematics import N_LEGS, StewartGeometry, forward_kinematics
 from serpar.sim.physics import PhysicsConfig
