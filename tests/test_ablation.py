@@ -23,7 +23,7 @@ from serpar.tasks.episode import build_runtime, run_episode
 from serpar.tasks.episode_config import EpisodeConfig, Outcome
 from serpar.tasks.platform_model import campaign_file
 
-pytestmark = pytest.mark.xdist_group("calibrated")
+pytestmark = [pytest.mark.xdist_group("calibrated"), pytest.mark.slow]
 
 BASE = EpisodeConfig(seed=0, holes=(0, 35))
 """Opposite corners of the grid: the platform moves ~35 mm from home, where the nominal

@@ -24,7 +24,7 @@ from serpar.sim.recording import read_recording
 from serpar.tasks.episode import run_episode
 from serpar.tasks.episode_config import EpisodeConfig
 
-pytestmark = pytest.mark.xdist_group("calibrated")
+pytestmark = [pytest.mark.xdist_group("calibrated"), pytest.mark.slow]
 
 EPISODES = {"friction": ((14,), 0.3, None), "none": ((14,), 0.0, None),
             "contact": ((14, 15, 20, 21), 0.3, 0.5)}

@@ -29,7 +29,7 @@ from serpar.sim.stewart import StewartConfig, built_geometry
 from serpar.sim.stewart_statics import nominal_load, static_leg_forces
 from serpar.twins.stewart_twin import EFFECTS, PAYLOAD_COM_M, PAYLOAD_KG, make_twin
 
-pytestmark = pytest.mark.xdist_group("stewart_twins")  # one worker builds the twins
+pytestmark = [pytest.mark.xdist_group("stewart_twins"), pytest.mark.slow]  # one worker builds the twins
 
 TRIALS = {"none": 0, "stewart_geometry": 0, "leg_thermal_drift": 0, "leg_compliance": 0,
           "leg_encoder_offset": 0}

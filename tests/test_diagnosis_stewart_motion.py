@@ -22,7 +22,7 @@ from serpar.errors import ConfigError, IdentificationError
 from serpar.sim.recording import Recording
 from serpar.twins.stewart_motion_twin import EFFECTS, make_twin
 
-pytestmark = pytest.mark.xdist_group("stewart_motion_twins")
+pytestmark = [pytest.mark.xdist_group("stewart_motion_twins"), pytest.mark.slow]
 
 TRIALS = {"none": 0, "leg_servo_lag": 0, "mocap_latency": 0}
 """Effect -> twin seed (default magnitude): the fixed, seeded set of concealed trials."""

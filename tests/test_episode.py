@@ -17,7 +17,7 @@ from serpar.tasks.episode import run_episode
 from serpar.tasks.episode_config import EpisodeConfig
 from serpar.tasks.run_episodes import RunSummary, run_many, summarise
 
-pytestmark = pytest.mark.xdist_group("calibrated")
+pytestmark = [pytest.mark.xdist_group("calibrated"), pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ from serpar.errors import ConfigError
 from serpar.tasks.episode_config import EpisodeConfig
 from serpar.tasks.run_episodes import run_many, summarise
 
-pytestmark = pytest.mark.xdist_group("ray")  # one local Ray instance at a time under -n auto
+pytestmark = [pytest.mark.xdist_group("ray"), pytest.mark.slow]  # one local Ray instance at a time under -n auto
 
 
 def fake_episode(cfg: EpisodeConfig, on_hole=None, label=None) -> list[dict]:

@@ -39,7 +39,7 @@ from serpar.kinematics.stewart_table import table5_errors
 from serpar.sim.scene import SceneConfig
 from serpar.sim.stewart import StewartConfig, built_geometry, home_strokes
 
-pytestmark = pytest.mark.xdist_group("calibrated")
+pytestmark = [pytest.mark.xdist_group("calibrated"), pytest.mark.slow]
 STEREO = StereoConfig(width=1024)
 HIDDEN = table5_errors()
 CELL = SceneConfig()

@@ -20,7 +20,7 @@ from serpar.vision.errors import CalibrationError, ImageError, TargetNotFound
 from serpar.vision.imaging import Camera, ImagingConfig
 from serpar.vision.stereo_calibration import Observation, calibrate_pair
 
-pytestmark = pytest.mark.xdist_group("calibrated")
+pytestmark = [pytest.mark.xdist_group("calibrated"), pytest.mark.slow]
 
 
 def test_top_pair_calibration(calibrated_top):

@@ -29,7 +29,7 @@ from serpar.vision.layout import plate_layout, tray_region
 from serpar.vision.plate import locate_holes
 from serpar.vision.tray_conductors import locate_conductors
 
-pytestmark = pytest.mark.xdist_group("calibrated")
+pytestmark = [pytest.mark.xdist_group("calibrated"), pytest.mark.slow]
 INSPECT = ("inspect_left", "inspect_right")
 TOP = ("top_left", "top_right")
 
