@@ -36,14 +36,20 @@ import pyarrow as pa
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from serpar.calibration.stewart_campaign import MocapNoise
 from serpar.errors import ConfigError
 from serpar.kinematics.stewart_kinematics import inverse_kinematics
-from serpar.sim import channels as ch
 from serpar.sim.physics import PhysicsConfig
 from serpar.sim.plants.stewart_platform import PlatformPlant, Reality, platform_spec
 from serpar.sim.recording import PhaseSegment, Recording, RecordingMeta
 from serpar.sim.stewart import StewartConfig
+from serpar.twins.stewart_twin import (  # the same payload, encoders and motion capture
+    LEG_SIGMA_M,
+    MOCAP,
+    PAYLOAD_COM_M,
+    PAYLOAD_KG,
+    mocap_quaternion,
+    stewart_channels,
+)
 
 Vec = NDArray[np.float64]
 
@@ -65,11 +71,6 @@ FAST_AMP = (0.006, np.radians(1.2))
 SLOW_LEG_SPEED, FAST_LEG_SPEED = 4e-3, 16e-3
 """Peak leg speed [m/s] of the slow and the fast multi-sine."""
 STROKE_MARGIN_M = 2e-3
-PAYLOAD_KG = 3.0
-PAYLOAD_COM_M = (0.03, -0.02, 0.05)
-LEG_SIGMA_M = 5e-8
-"""Leg encoder noise per sample [m] (as twins/stewart_twin.py)."""
-MOCAP = MocapNoise()
 MAX_DELAY_S = 0.1
 
 
@@ -213,18 +214,9 @@ def _recording(t: Vec, cmd: Vec, slides: Vec, pos: Vec, quat: Vec, cfg: StewartC
     n = len(t)
     sigma_a = np.radians(MOCAP.angle_deg)
     mp = pos + MOCAP.position_m * rng.standard_normal((n, 3))
-    noise = sigma_a * rng.standard_normal((n, 3))
-    xyzw = (Rotation.from_rotvec(noise) * Rotation.from_quat(quat[:, [1, 2, 3, 0]])).as_quat()
-    q = np.column_stack([xyzw[:, 3], xyzw[:, :3]]) * np.sign(xyzw[:, 3:4] + 1e-300)
+    q = mocap_quaternion(Rotation.from_quat(quat[:, [1, 2, 3, 0]]), sigma_a, rng)
     legs = cfg.l_min + slides + LEG_SIGMA_M * rng.standard_normal((n, 6))
-    cols: dict[str, Vec] = {ch.TIME: t}
-    cols.update({c: cfg.l_min + cmd[:, i] for i, c in enumerate(ch.LEG_CMD)})
-    cols.update({c: legs[:, i] for i, c in enumerate(ch.LEG)})
-    cols.update({c: mp[:, j] for j, c in enumerate(ch.PLATFORM_POSITION)})
-    cols.update({c: q[:, j] for j, c in enumerate(ch.PLATFORM_QUAT)})
-    sigma = {**{c: LEG_SIGMA_M for c in ch.LEG},
-             **{c: MOCAP.position_m for c in ch.PLATFORM_POSITION},
-             **{c: sigma_a / 2 for c in ch.PLATFORM_QUAT}}
+    cols, sigma = stewart_channels(t, cfg.l_min + cmd, legs, mp, q, sigma_a)
     model = {"stewart": {"l_min": cfg.l_min, "stroke": cfg.stroke, "home_z": cfg.home_z,
                          "swap_legs12": cfg.swap_legs12, "payload_kg": PAYLOAD_KG,
                          "payload_com_m": list(PAYLOAD_COM_M),

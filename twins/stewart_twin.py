@@ -170,6 +170,29 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int, n_poses: i
     return rec, answer
 
 
+def mocap_quaternion(true: Rotation, sigma_a: float, rng: np.random.Generator) -> Vec:
+    """(n, 4) w-first unit quaternions that motion capture reads for the `true` rotations:
+    a white rotation noise of `sigma_a` [rad] per axis, sign fixed to w >= 0."""
+    noise = sigma_a * rng.standard_normal((len(true), 3))
+    xyzw = (Rotation.from_rotvec(noise) * true).as_quat()
+    return np.column_stack([xyzw[:, 3], xyzw[:, :3]]) * np.sign(xyzw[:, 3:4] + 1e-300)
+
+
+def stewart_channels(t: Vec, leg_cmd: Vec, legs: Vec, position: Vec, quat: Vec, sigma_a: float
+                     ) -> tuple[dict[str, Vec], dict[str, float]]:
+    """A platform recording's columns (schema names) and their noise sigma: commanded and
+    measured leg lengths [m], the motion-capture pose (quaternion sigma: half the rotation's)."""
+    cols: dict[str, Vec] = {ch.TIME: t}
+    cols.update({c: leg_cmd[:, i] for i, c in enumerate(ch.LEG_CMD)})
+    cols.update({c: legs[:, i] for i, c in enumerate(ch.LEG)})
+    cols.update({c: position[:, j] for j, c in enumerate(ch.PLATFORM_POSITION)})
+    cols.update({c: quat[:, j] for j, c in enumerate(ch.PLATFORM_QUAT)})
+    sigma = {**{c: LEG_SIGMA_M for c in ch.LEG},
+             **{c: MOCAP.position_m for c in ch.PLATFORM_POSITION},
+             **{c: sigma_a / 2 for c in ch.PLATFORM_QUAT}}
+    return cols, sigma
+
+
 def _recording(pos: Vec, rot: Vec, slides: Vec, cmd: Vec, start: Vec, n_hold: int,
                reality: Reality, cfg: StewartConfig, rng: np.random.Generator) -> Recording:
     n = len(pos)
@@ -177,19 +200,10 @@ def _recording(pos: Vec, rot: Vec, slides: Vec, cmd: Vec, start: Vec, n_hold: in
     idx = np.repeat(np.arange(n), n_hold)
     sigma_a = np.radians(MOCAP.angle_deg)
     mp = pos[idx] + MOCAP.position_m * rng.standard_normal((len(t), 3))
-    noise = sigma_a * rng.standard_normal((len(t), 3))
-    xyzw = (Rotation.from_rotvec(noise) * Rotation.from_matrix(rot[idx])).as_quat()
-    quat = np.column_stack([xyzw[:, 3], xyzw[:, :3]]) * np.sign(xyzw[:, 3:4] + 1e-300)
+    quat = mocap_quaternion(Rotation.from_matrix(rot[idx]), sigma_a, rng)
     legs = cfg.l_min + slides[idx] + reality.encoder_offset_m \
         + LEG_SIGMA_M * rng.standard_normal((len(t), 6))
-    cols: dict[str, Vec] = {ch.TIME: t}
-    cols.update({c: cfg.l_min + cmd[idx, i] for i, c in enumerate(ch.LEG_CMD)})
-    cols.update({c: legs[:, i] for i, c in enumerate(ch.LEG)})
-    cols.update({c: mp[:, j] for j, c in enumerate(ch.PLATFORM_POSITION)})
-    cols.update({c: quat[:, j] for j, c in enumerate(ch.PLATFORM_QUAT)})
-    sigma = {**{c: LEG_SIGMA_M for c in ch.LEG},
-             **{c: MOCAP.position_m for c in ch.PLATFORM_POSITION},
-             **{c: sigma_a / 2 for c in ch.PLATFORM_QUAT}}
+    cols, sigma = stewart_channels(t, cfg.l_min + cmd[idx], legs, mp, quat, sigma_a)
     model = {"stewart": {"l_min": cfg.l_min, "stroke": cfg.stroke, "home_z": cfg.home_z,
                          "swap_legs12": cfg.swap_legs12, "payload_kg": PAYLOAD_KG,
                          "payload_com_m": list(PAYLOAD_COM_M)},
