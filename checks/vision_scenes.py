@@ -33,7 +33,7 @@ from serpar.vision.tray_conductors import ConductorSighting
 RAMP_S = 0.2
 """Minimum-jerk ramp from home to the test pose [s]."""
 SETTLE_S = 0.6
-"""Hold after the ramp [s]: the leg PID's integral unwinds to ~0.2 um (tasks/stewart_checks)."""
+"""Hold after the ramp [s]: the leg PID's integral unwinds to ~0.2 um (checks/stewart_checks.py)."""
 
 
 @dataclass(frozen=True)

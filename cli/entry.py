@@ -118,7 +118,9 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="serpar", description=__doc__.split("\n")[0] if __doc__ else None)
+    parser = _Parser(prog="serpar", description="serpar: a MuJoCo simulator of a serial-parallel precision "
+                     "assembly cell (Panda arm, 6-UPS Stewart platform, H7/h6 journal insertion, stereo vision). "
+                     "Start with `serpar run --holes 3`.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser,
                                 metavar="{info,render,validate,control-check,workspace,vision-check,bench,run,ablate,replay,calibrate,error-analysis,diagnose,twin,blind-bench,import-csv}")
 

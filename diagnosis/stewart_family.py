@@ -192,7 +192,7 @@ class StewartFamily:
     # -- the updated model for serpar run --------------------------------------------------
     def export(self, params: Mapping[str, Vec], stem: Path) -> list[Path]:
         """With geometry or encoder offsets selected: ``<stem>.stewart_params.json`` in the
-        tasks/stewart_params format (``stewart_calibration: <file>`` of ``serpar run``); an
+        calibration/stewart_params.py format (``stewart_calibration: <file>`` of ``serpar run``); an
         encoder offset o is the leg-length error dl = -o. Other effects have no place in it."""
         if GEOMETRY not in params and ENCODER not in params:
             return []

@@ -5,7 +5,7 @@ only from the scene's sites (serpar.checks.vision_scenes); the vision code never
 
 Two platform poses (seeds not used while the detectors were developed), five conductors
 seated in each. Bounds are what was measured on these scenes, with margin (numbers in the
-comments); tasks/vision_scenes.score_* compute the errors.
+comments); checks/vision_scenes.score_* compute the errors.
 """
 
 from dataclasses import dataclass

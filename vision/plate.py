@@ -31,6 +31,7 @@ from scipy.spatial.transform import Rotation
 from serpar.sim.baseplate import BaseplateConfig
 from serpar.sim.conductor import ConductorConfig
 from serpar.sim.scene import SceneConfig
+from serpar.sim.tolerances import HOLE_H7
 from serpar.vision.camera import StereoPair
 from serpar.vision.errors import HoleNotVisible, PlateNotFound
 from serpar.vision.layout import BoxRegion, PlateLayout, plate_layout
@@ -202,7 +203,7 @@ def locate_holes(pair: StereoPair, left: np.ndarray, right: np.ndarray,
     region_top = layout.region(plate, above=conductor.body_length)
     union = BoxRegion(tuple(np.minimum(region_hole.low, region_top.low)),
                       tuple(np.maximum(region_hole.high, region_top.high)))
-    entry = plate.bore(1.7e-3).diameter + 2 * plate.chamfer
+    entry = plate.bore(HOLE_H7.nominal).diameter + 2 * plate.chamfer
     holes_uv, tops_uv, greys = [], [], []
     for cam, img in ((pair.left, left), (pair.right, right)):
         window = union.pixel_window(cam)
