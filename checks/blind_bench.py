@@ -1,10 +1,14 @@
 """``serpar blind-bench``: random concealed effect (or none) and magnitude per trial, make the
 twin, diagnose it without the answer, score.
 
-Scores (issue 7 targets): the top-ranked effect is the hidden one (>= 90 % of trials with an
-effect); "no missing physics" on effect-free trials (>= 95 %); held-out whitened RMS after
-the fit over the noise floor (1 for whitened residuals; target <= 1.5); diagnosis wall time
-(<= 2 min). A trial that raises is recorded with its error and scored as a miss.
+Three kinds of trial: a hidden effect of the candidate library (the first *established*
+finding must be it; target >= 90 %), no effect (nothing may be established; >= 95 %), and no
+effect in a recording that states its noise WRONG_SIGMA times too small (nothing established,
+and the residual check must call the stated sigma optimistic; >= 90 %). On every trial an
+established finding that is not the hidden effect counts as a wrong finding (target: none).
+Held-out whitened RMS after the fit (1 = noise; target <= 1.5 where sigma is stated right) and
+the diagnosis wall time are reported. A trial that raises is recorded with its error and
+scored as a miss.
 """
 
 from __future__ import annotations
@@ -21,6 +25,8 @@ from serpar.errors import ConfigError
 from serpar.twins.registry import DOMAINS, domain_module, magnitude_range, make_twin
 
 RMS_TARGET = 1.5
+WRONG_SIGMA = 2.0
+"""Effect-free trials whose recording states its noise this many times too small."""
 
 
 @dataclass(frozen=True)
@@ -31,57 +37,97 @@ class Trial:
     effect: str
     magnitude: float
     top_effect: str | None
+    """The first established finding."""
     verdict: str
     correct: bool
     heldout_rms_ratio: float
     diagnosis_s: float
     error: str | None = None
+    sigma_error: float = 1.0
+    """The recording states its noise this many times too small (1: stated correctly)."""
+    established: tuple[str, ...] = ()
+    suspected: tuple[str, ...] = ()
+    noise_ratio: float | None = None
+    """The data's noise over the stated sigma, as the diagnosis estimated it."""
+
+    @property
+    def kind(self) -> str:
+        if self.effect != "none":
+            return "effect"
+        return "wrong_sigma" if self.sigma_error != 1.0 else "none"
+
+    @property
+    def wrong_finding(self) -> bool:
+        """An established finding that is not the hidden effect."""
+        return any(e != self.effect for e in self.established)
 
     def as_dict(self) -> dict[str, object]:
-        return dict(self.__dict__)
+        return {**self.__dict__, "kind": self.kind, "wrong_finding": self.wrong_finding}
+
+
+WRONG = "none, stated sigma wrong"
 
 
 def plan(trials: int, seed: int, domains: tuple[str, ...]) -> list[tuple[str, str, float, int]]:
-    """(domain, effect or 'none', magnitude, twin seed) per trial: effects in equal shares,
-    with 'none' as one more choice per domain."""
+    """(domain, effect, 'none' or WRONG, magnitude, twin seed) per trial: effects in equal
+    shares, with 'none' and an effect-free recording that states its noise WRONG_SIGMA times
+    too small as two more choices per domain."""
     if trials < 1:
         raise ConfigError(f"--trials must be >= 1, got {trials}")
     bad = [d for d in domains if d not in DOMAINS]
     if bad:
         raise ConfigError(f"unknown domain(s) {bad}; valid: {', '.join(DOMAINS)}")
-    choices = [(d, e) for d in domains for e in ("none", *domain_module(d).EFFECTS)]
+    choices = [(d, e) for d in domains for e in ("none", WRONG, *domain_module(d).EFFECTS)]
     rng = np.random.default_rng([seed, 77])
     out = []
     for k in range(trials):
         d, e = choices[int(rng.integers(len(choices)))]
-        lo, hi = magnitude_range(e, d) if e != "none" else (0.0, 0.0)
+        lo, hi = magnitude_range(e, d) if e not in ("none", WRONG) else (0.0, 0.0)
         out.append((d, e, float(rng.uniform(lo, hi)), int(rng.integers(1_000_000)) + k))
     return out
 
 
 def run_trial(index: int, domain: str, effect: str, magnitude: float, seed: int) -> Trial:
+    hidden = None if effect in ("none", WRONG) else effect
+    sigma_error = WRONG_SIGMA if effect == WRONG else 1.0
+    label = "none" if hidden is None else hidden
     try:
-        rec, _answer = make_twin(None if effect == "none" else effect,
-                                 magnitude if effect != "none" else None, seed, domain)
+        rec, _answer = make_twin(hidden, magnitude if hidden else None, seed, domain, sigma_error)
         t0 = time.perf_counter()
         diag = diagnose(family_from_recording(rec), seed)
         wall = time.perf_counter() - t0
     except Exception as exc:  # noqa: BLE001 (one failing trial never kills the bench)
-        return Trial(index, seed, domain, effect, magnitude, None, "", False, float("nan"),
-                     float("nan"), f"{type(exc).__name__}: {exc}")
-    correct = diag.no_missing_physics if effect == "none" else diag.top_effect == effect
-    return Trial(index, seed, domain, effect, magnitude, diag.top_effect, diag.verdict,
-                 bool(correct), diag.heldout_rms_after, wall)
+        return Trial(index, seed, domain, label, magnitude, None, "", False, float("nan"),
+                     float("nan"), f"{type(exc).__name__}: {exc}", sigma_error)
+    established = tuple(f.effect for f in diag.established)
+    check = diag.residual
+    ratio = None if check is None else check.noise_ratio
+    if hidden is not None:
+        correct = diag.top_effect == hidden
+    elif sigma_error == 1.0:
+        correct = not established
+    else:  # nothing found, and the stated sigma called optimistic by the data's own noise
+        correct = (not established and ratio is not None and check is not None
+                   and check.structured is False and ratio >= 0.75 * sigma_error)
+    return Trial(index, seed, domain, label, magnitude, diag.top_effect, diag.verdict,
+                 bool(correct), diag.heldout_rms_after, wall, None, sigma_error, established,
+                 tuple(f.effect for f in diag.suspected), ratio)
+
+
+KINDS = {"effect": "hidden effect in the library: top established finding right",
+         "none": "no effect: nothing established",
+         "wrong_sigma": f"no effect, stated sigma {WRONG_SIGMA:g}x too small: nothing "
+                        "established and the stated sigma called optimistic"}
 
 
 def summarise(trials: list[Trial]) -> dict[str, object]:
-    with_effect = [t for t in trials if t.effect != "none"]
-    none = [t for t in trials if t.effect == "none"]
-    ratios = np.array([t.heldout_rms_ratio for t in trials if np.isfinite(t.heldout_rms_ratio)])
+    ratios = np.array([t.heldout_rms_ratio for t in trials
+                       if np.isfinite(t.heldout_rms_ratio) and t.kind != "wrong_sigma"])
     walls = np.array([t.diagnosis_s for t in trials if np.isfinite(t.diagnosis_s)])
     per_effect: dict[str, dict[str, object]] = {}
     for t in trials:
-        e = per_effect.setdefault(t.effect, {"trials": 0, "correct": 0, "rms_ratios": []})
+        key = t.effect if t.kind != "wrong_sigma" else WRONG
+        e = per_effect.setdefault(key, {"trials": 0, "correct": 0, "rms_ratios": []})
         e["trials"] += 1  # type: ignore[operator]
         e["correct"] += int(t.correct)  # type: ignore[operator]
         e["rms_ratios"].append(t.heldout_rms_ratio)  # type: ignore[union-attr]
@@ -89,9 +135,21 @@ def summarise(trials: list[Trial]) -> dict[str, object]:
     def share(ts: list[Trial]) -> float | None:
         return float(np.mean([t.correct for t in ts])) if ts else None
 
+    rows = {}
+    for kind, words in KINDS.items():
+        ts = [t for t in trials if t.kind == kind]
+        r = np.array([t.heldout_rms_ratio for t in ts if np.isfinite(t.heldout_rms_ratio)])
+        rows[kind] = {"what": words, "trials": len(ts), "correct": share(ts),
+                      "wrong_findings_established": sum(t.wrong_finding for t in ts),
+                      "heldout_rms_median": float(np.median(r)) if r.size else None,
+                      "heldout_rms_max": float(r.max()) if r.size else None}
     return {
         "trials": len(trials), "errors": sum(t.error is not None for t in trials),
-        "top_effect_correct": share(with_effect), "no_missing_physics_on_none": share(none),
+        "rows": rows,
+        "top_effect_correct": rows["effect"]["correct"],
+        "nothing_established_on_none": rows["none"]["correct"],
+        "wrong_sigma_detected": rows["wrong_sigma"]["correct"],
+        "wrong_findings_established": sum(t.wrong_finding for t in trials),
         "heldout_rms_ratio_median": float(np.median(ratios)) if ratios.size else None,
         "heldout_rms_ratio_max": float(ratios.max()) if ratios.size else None,
         "heldout_rms_within_target": float(np.mean(ratios <= RMS_TARGET)) if ratios.size else None,

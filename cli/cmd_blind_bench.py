@@ -32,20 +32,29 @@ def cmd_blind_bench(args: argparse.Namespace) -> int:
     if args.json:
         print_json({"summary": summary, "trials": [t.as_dict() for t in trials]})
         return 0
-    print(table(["#", "domain", "hidden", "magnitude", "top-ranked", "ok", "held-out RMS/noise",
-                 "diagnosis [s]", "error"],
-                [[t.index, t.domain, t.effect, f"{t.magnitude:.3g}", t.top_effect or "-",
-                  "yes" if t.correct else "NO", f"{t.heldout_rms_ratio:.3g}",
+    print(table(["#", "domain", "hidden", "stated sigma", "magnitude", "established", "suspected",
+                 "ok", "held-out RMS/noise", "noise est.", "diagnosis [s]", "error"],
+                [[t.index, t.domain, t.effect,
+                  f"/{t.sigma_error:g}" if t.sigma_error != 1 else "right",
+                  f"{t.magnitude:.3g}", ", ".join(t.established) or "-",
+                  ", ".join(t.suspected) or "-", "yes" if t.correct else "NO",
+                  f"{t.heldout_rms_ratio:.3g}",
+                  "-" if t.noise_ratio is None else f"{t.noise_ratio:.2f}",
                   f"{t.diagnosis_s:.1f}", (t.error or "")[:60]] for t in trials]))
 
     def pct(x: object) -> str:
         return "-" if x is None else f"{100 * float(x):.0f} %"  # type: ignore[arg-type]
 
-    print(f"top-ranked effect correct: {pct(summary['top_effect_correct'])} (target >= 90 %); "
-          f"'no missing physics' on effect-free trials: "
-          f"{pct(summary['no_missing_physics_on_none'])} (target >= 95 %)")
-    print(f"held-out RMS / noise floor: median {summary['heldout_rms_ratio_median']:.3g}, "
-          f"max {summary['heldout_rms_ratio_max']:.3g}, within {RMS_TARGET}: "
+    rows = summary["rows"]
+    print(table(["trials", "n", "correct", "target", "wrong findings established",
+                 "held-out RMS/noise median / max"],
+                [[r["what"], r["trials"], pct(r["correct"]), target,
+                  r["wrong_findings_established"],
+                  "-" if r["heldout_rms_median"] is None else
+                  f"{r['heldout_rms_median']:.3g} / {r['heldout_rms_max']:.3g}"]
+                 for (kind, r), target in zip(rows.items(), (">= 90 %", ">= 95 %", ">= 90 %"))]))
+    print(f"wrong findings established on any trial: {summary['wrong_findings_established']} "
+          f"(target 0); held-out RMS / noise within {RMS_TARGET} where sigma is stated right: "
           f"{pct(summary['heldout_rms_within_target'])}; diagnosis wall time median "
           f"{summary['diagnosis_s_median']:.1f} s, max {summary['diagnosis_s_max']:.1f} s; "
           f"{summary['errors']} trial(s) failed")

@@ -24,6 +24,9 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="size of the effect (units per domain twin module, e.g. "
                         "twins/stewart_twin.py: K, m/N, m or x Table 5; default: its default "
                         "size)")
+    p.add_argument("--sigma-error", type=float, default=1.0,
+                   help="the recording states its noise sigma this many times too small "
+                        "(default 1: stated correctly)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--out", required=False, help="output folder (recording + answer.json)")
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -40,7 +43,7 @@ def cmd_twin(args: argparse.Namespace) -> int:
         raise ConfigError("--out DIR is required (the recording goes there, the truth to "
                           "DIR/answer.json)")
     effect = None if args.effect == "none" else args.effect
-    rec, answer = make_twin(effect, args.magnitude, args.seed, args.domain)
+    rec, answer = make_twin(effect, args.magnitude, args.seed, args.domain, args.sigma_error)
     out = write_recording(Path(args.out), rec)
     (out / "answer.json").write_text(json.dumps(answer, indent=2, default=float))
     if args.json:

@@ -22,6 +22,7 @@ from serpar.diagnosis.arm_dynamics_signals import SmoothingConfig, read_arm_seri
 from serpar.diagnosis.arm_dynamics_terms import Terms, compute_terms, row_sigma
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows
+from serpar.diagnosis.residual import consecutive_noise_ratio
 from serpar.errors import IdentificationError
 from serpar.sim import channels as ch
 from serpar.sim.recording import Recording
@@ -101,6 +102,12 @@ class ArmDynamicsFamily:
             sigma_link, sigma_drive = row_sigma(t.measurement_var, t.acc_var,
                                                 t.mass_link[rows] + added, t.mass_full[rows] + added)
         return np.hstack([link / sigma_link, drive / sigma_drive]).ravel()
+
+    def noise_ratio(self, rows: NDArray[np.int64], whitened: Vec) -> tuple[float, str] | None:
+        """The data's noise over the stated sigma, from sample-to-sample differences (white
+        sensor noise survives them, the slow residual of missing physics cancels)."""
+        r = consecutive_noise_ratio(rows, whitened, len(CHANNELS))
+        return None if r is None else (r, "sample-to-sample differences")
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         block = np.floor((self.terms.time - self.terms.time[0]) / self.cfg.block_s).astype(int)

@@ -80,7 +80,8 @@ def _full_effects(fam: StaticArmFamily) -> list[tuple[Effect, NDArray[np.float64
     j = range(1, N_JOINTS + 1)
     out.append((Effect("joint_compliance", "joint compliance (gravitational deflection)",
                        tuple(f"c{k}" for k in j), ("rad/(N m)",) * N_JOINTS,
-                       np.zeros(N_JOINTS), np.full(N_JOINTS, -1e-3), np.full(N_JOINTS, 1e-3)),
+                       np.zeros(N_JOINTS), np.zeros(N_JOINTS), np.full(N_JOINTS, 1e-3),
+                       physical_lower=True),
                 np.zeros(N_JOINTS)))
     friction = fam.data.approach is not None
     bn = tuple(f"b{k}" for k in j) + (("f",) if friction else ())
@@ -89,7 +90,7 @@ def _full_effects(fam: StaticArmFamily) -> list[tuple[Effect, NDArray[np.float64
     hi = np.r_[np.full(N_JOINTS, 0.02), [3.0] if friction else []]
     x0 = np.r_[np.zeros(N_JOINTS), [0.2] if friction else []]
     out.append((Effect("backlash", "joint backlash (clearance between motor and link)", bn, bu,
-                       x0, lo, hi), np.r_[np.full(N_JOINTS, 1e-3), x0[N_JOINTS:]]))
+                       x0, lo, hi, physical_lower=True), np.r_[np.full(N_JOINTS, 1e-3), x0[N_JOINTS:]]))
     en = tuple(f"o{k}" for k in j) + tuple(f"s{k}" for k in j)
     out.append((Effect("encoder", "encoder offset and scale (transmission error)", en,
                        ("rad",) * N_JOINTS + ("-",) * N_JOINTS, np.zeros(2 * N_JOINTS),
@@ -115,11 +116,6 @@ def _jacobian(fam: StaticArmFamily, fixed: dict[str, NDArray[np.float64]], name:
     return np.column_stack(cols) if cols else np.zeros((len(fam.residual(fixed, rows)), 0))
 
 
-def _restrict(e: Effect, keep: NDArray[np.int64]) -> Effect:
-    return Effect(e.name, e.summary, tuple(e.param_names[i] for i in keep),
-                  tuple(e.units[i] for i in keep), e.x0[keep], e.lower[keep], e.upper[keep])
-
-
 def candidate_effects(fam: StaticArmFamily) -> tuple[Effect, ...]:
     """The effects of ``fam`` restricted to what its measurements can identify."""
     rows = np.arange(fam.n_samples)
@@ -139,5 +135,5 @@ def candidate_effects(fam: StaticArmFamily) -> tuple[Effect, ...]:
         if keep.size:
             if effect.name == "geometric":
                 fam.geo_idx = fam.geo_idx[keep]
-            effects.append(_restrict(effect, keep))
+            effects.append(effect.restricted(keep))
     return tuple(effects)

@@ -30,6 +30,7 @@ from serpar.diagnosis.arm_static_model import (
 )
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows
+from serpar.diagnosis.stability import default_folds
 from serpar.errors import IdentificationError
 from serpar.kinematics.mdh import panda_chain
 from serpar.sim.plants.static_panda import TruthConfig, nominal_plant
@@ -203,6 +204,16 @@ class StaticArmFamily:
         held = np.concatenate([rng.permutation(idx[groups == g])[:int(np.sum(groups == g)) // 3]
                                for g in np.unique(groups)])
         return np.setdiff1d(idx, held), np.sort(held)
+
+    def folds(self, k: int) -> list[tuple[NDArray[np.int64], NDArray[np.int64]]]:
+        """Resampling folds: with two or more fixture placements, each placement held out in
+        turn (what holds up must hold up on every placement the split could hold out); else
+        the engine's default folds over the rows."""
+        d, idx = self.data, np.arange(self.data.n)
+        if d.placement is None or len(set(d.placement.tolist())) < 2:
+            return default_folds(self.n_samples, k)
+        return [(idx[d.placement != p], idx[d.placement == p])
+                for p in sorted(set(d.placement.tolist()))]
 
     def locate(self, rows: NDArray[np.int64], whitened: NDArray[np.float64]) -> list[LocateRow]:
         rows = np.asarray(rows, np.int64)

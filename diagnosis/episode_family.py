@@ -34,6 +34,8 @@ from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.insertion_friction import EFFECT as FRICTION
 from serpar.diagnosis.insertion_friction import ChamferSlides, chamfer_slides
 from serpar.diagnosis.locate import locate_rows
+from serpar.diagnosis.residual import consecutive_noise_ratio
+from serpar.diagnosis.stability import default_folds
 from serpar.errors import IdentificationError
 from serpar.sim.recording import Recording
 
@@ -107,6 +109,25 @@ class EpisodeFamily:
         if self.slides is None or slide.size == 0:
             return out
         return np.concatenate([out, self.slides.residual(params.get(FRICTION.name), slide)])
+
+    def folds(self, k: int) -> list[tuple[NDArray[np.int64], NDArray[np.int64]]]:
+        """The engine's folds over the free-motion rows, with the chamfer slides dealt to the
+        folds one by one (each fold must hold some out to judge contact friction)."""
+        arm = default_folds(self.n_arm, k)
+        if self.slides is None:
+            return arm
+        slides = self.n_arm + np.arange(self.slides.n)
+        out = []
+        for f, (train, held) in enumerate(arm):
+            mine = slides[np.arange(self.slides.n) % len(arm) == f]
+            out.append((np.r_[train, np.setdiff1d(slides, mine)], np.r_[held, mine]))
+        return out
+
+    def noise_ratio(self, rows: NDArray[np.int64], whitened: Vec) -> tuple[float, str] | None:
+        """The arm channels' noise over the stated sigma, from sample-to-sample differences."""
+        arm, _ = self._parts(rows)
+        r = consecutive_noise_ratio(self.keep[arm], np.asarray(whitened)[:14 * arm.size], 14)
+        return None if r is None else (r, "sample-to-sample differences of the arm channels")
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         t = self.inner.terms.time[self.keep]

@@ -16,7 +16,7 @@ final fit's parameters (block name -> values) to files named ``<stem>.<what>``; 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
@@ -39,6 +39,15 @@ class Effect:
     x0: NDArray[np.float64]
     lower: NDArray[np.float64]
     upper: NDArray[np.float64]
+    physical_lower: bool = False
+    """The lower bound is a physical limit (no friction, no compliance, no clearance), so a
+    parameter resting on it says "absent here"; every other bound only limits the search, and
+    a parameter pinned on one means the candidate cannot be what the data show."""
+    excess_words: str = ""
+    """How to say a negative first parameter: something the nominal model has and the machine
+    lacks (``"{value}"`` is replaced by its magnitude with unit), e.g. a payload of -0.7 kg."""
+    fixed: tuple[int, ...] = ()
+    """Parameters held at zero because the data do not identify them (:meth:`fix`)."""
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -65,6 +74,28 @@ class Effect:
     @property
     def n_params(self) -> int:
         return len(self.param_names)
+
+    def restricted(self, keep: NDArray[np.int64]) -> Effect:
+        """The same effect with only the parameters ``keep`` (indices into param_names)."""
+        return replace(self, param_names=tuple(self.param_names[i] for i in keep),
+                       units=tuple(self.units[i] for i in keep), x0=self.x0[keep],
+                       lower=self.lower[keep], upper=self.upper[keep])
+
+    def pinned(self, values: NDArray[np.float64], rel_tol: float = 1e-3) -> list[int]:
+        """Indices of the parameters that sit on a search bound (not a physical limit)."""
+        span = np.maximum(self.upper - self.lower, 1e-300)
+        at_lo = (values - self.lower) <= rel_tol * span
+        at_hi = (self.upper - values) <= rel_tol * span
+        if self.physical_lower:
+            at_lo[:] = False
+        free = np.ones(self.n_params, bool)
+        free[list(self.fixed)] = False
+        return [int(i) for i in np.flatnonzero((at_lo | at_hi) & free)]
+
+    def fix(self, indices: list[int]) -> Effect:
+        """The same effect with the parameters ``indices`` held at zero (the fit leaves them
+        out of its search)."""
+        return replace(self, fixed=tuple(sorted(set(self.fixed) | set(indices))))
 
 
 @dataclass(frozen=True)

@@ -53,9 +53,20 @@ class Fit:
         return float(np.sqrt(self.heldout_chi2 / max(self.n_heldout, 1)))
 
 
-def blocks_of(family: Family, active: tuple[str, ...]) -> tuple[Effect, ...]:
-    """The baseline (if any) followed by the named effects of the family."""
-    by_name = {e.name: e for e in family.effects}
+def earns(current: Fit, new: Fit) -> tuple[float, float, bool]:
+    """``new`` has the effects of ``current`` and more. (training BIC change, held-out chi^2 drop, whether the extra parameters are earned)."""
+    k = new.n_params - current.n_params
+    d_bic = new.bic - current.bic
+    d_held = current.heldout_chi2 - new.heldout_chi2
+    ok = k > 0 and d_bic < 0 and d_held > k * float(np.log(max(new.n_heldout, 2)))
+    return d_bic, d_held, ok
+
+
+def blocks_of(family: Family, active: tuple[str, ...],
+              overrides: Mapping[str, Effect] | None = None) -> tuple[Effect, ...]:
+    """The baseline (if any) followed by the named effects of the family (``overrides``: the
+    same effects with some parameters fixed, by name)."""
+    by_name = {e.name: e for e in family.effects} | dict(overrides or {})
     unknown = [a for a in active if a not in by_name]
     if unknown:
         raise IdentificationError(f"unknown effect(s) {', '.join(unknown)}; this recording's "
@@ -74,31 +85,51 @@ def unpack(blocks: tuple[Effect, ...], x: NDArray[np.float64]) -> dict[str, NDAr
 
 def fit_model(family: Family, active: tuple[str, ...], train: NDArray[np.int64],
               heldout: NDArray[np.int64],
-              start: Mapping[str, NDArray[np.float64]] | None = None) -> Fit:
+              start: Mapping[str, NDArray[np.float64]] | None = None,
+              overrides: Mapping[str, Effect] | None = None) -> Fit:
     """Fit the baseline and the ``active`` effects on ``train``; score on ``heldout``.
-    ``start``: parameters of a previous fit to begin from (blocks it lacks start at x0)."""
-    blocks = blocks_of(family, active)
+    ``start``: parameters of a previous fit to begin from (blocks it lacks start at x0);
+    ``overrides``: effects with parameters fixed (:meth:`Effect.fix`), by name."""
+    blocks = blocks_of(family, active, overrides)
     start = start or {}
     x0 = np.concatenate([np.clip(start.get(b.name, b.x0), b.lower, b.upper) for b in blocks]
                         or [np.zeros(0)])
     lo = np.concatenate([b.lower for b in blocks] or [np.zeros(0)])
     hi = np.concatenate([b.upper for b in blocks] or [np.zeros(0)])
+    # parameters held at zero (Effect.fix) are left out of the search, not boxed in
+    free = _free_mask(blocks)
+    x0[~free] = 0.0
 
-    def fun(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        return family.residual(unpack(blocks, x), train)
+    def full(xf: NDArray[np.float64]) -> NDArray[np.float64]:
+        x = np.zeros(free.size)
+        x[free] = xf
+        return x
 
-    if x0.size == 0:
-        r = fun(x0)
-        return _score(family, active, blocks, x0, r, np.zeros((r.size, 0)), heldout, 1)
+    def fun(xf: NDArray[np.float64]) -> NDArray[np.float64]:
+        return family.residual(unpack(blocks, full(xf)), train)
+
+    if not free.any():
+        r = fun(x0[free])
+        return _score(family, active, blocks, x0, r, np.zeros((r.size, x0.size)), heldout, 1)
     # a family may offer its exact Jacobian (columns in block order); else 2-point differences
     exact = getattr(family, "jacobian", None)
-    jac = "2-point" if not callable(exact) else (lambda x: exact(unpack(blocks, x), train))
-    sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
-                        xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=200 * (x0.size + 1))
+    jac = ("2-point" if not callable(exact)
+           else (lambda xf: exact(unpack(blocks, full(xf)), train)[:, free]))
+    n_free = int(free.sum())
+    sol = least_squares(fun, x0[free], jac=jac, bounds=(lo[free], hi[free]), method="trf",
+                        x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10,
+                        max_nfev=200 * (n_free + 1))
     if not np.all(np.isfinite(sol.fun)):
         raise IdentificationError(f"the fit of {'+'.join(active) or 'the baseline'} produced "
                                   "non-finite residuals")
-    return _score(family, active, blocks, sol.x, sol.fun, sol.jac, heldout, int(sol.nfev))
+    jac_full = np.zeros((sol.fun.size, free.size))
+    jac_full[:, free] = sol.jac
+    return _score(family, active, blocks, full(sol.x), sol.fun, jac_full, heldout, int(sol.nfev))
+
+
+def _free_mask(blocks: tuple[Effect, ...]) -> NDArray[np.bool_]:
+    return np.concatenate([np.isin(np.arange(b.n_params), b.fixed, invert=True) for b in blocks]
+                          or [np.zeros(0, bool)])
 
 
 def _score(family: Family, active: tuple[str, ...], blocks: tuple[Effect, ...],
@@ -106,9 +137,12 @@ def _score(family: Family, active: tuple[str, ...], blocks: tuple[Effect, ...],
            heldout: NDArray[np.int64], nfev: int) -> Fit:
     params = unpack(blocks, x)
     chi2 = float(r @ r)
-    k = x.size
+    k = x.size - sum(len(b.fixed) for b in blocks)
     jac = np.asarray(jac, float)
-    cov = np.linalg.pinv(jac.T @ jac) if k else np.zeros((0, 0))
+    free = _free_mask(blocks)
+    cov = np.zeros((x.size, x.size))
+    if k:
+        cov[np.ix_(free, free)] = np.linalg.pinv(jac[:, free].T @ jac[:, free])
     dof = max(r.size - k, 1)
     cov = cov * max(1.0, chi2 / dof)
     std = unpack(blocks, np.sqrt(np.clip(np.diag(cov), 0.0, None)))

@@ -36,7 +36,8 @@ Vec = NDArray[np.float64]
 
 NAME = "contact_friction"
 EFFECT = Effect(NAME, "journal/bore sliding friction in the insertion (chamfer slide)",
-                ("d_mu",), ("1",), np.zeros(1), np.array([-0.19]), np.array([1.0]))
+                ("d_mu",), ("1",), np.zeros(1), np.array([-0.19]), np.array([1.0]),
+                physical_lower=True)
 """The candidate: the friction coefficient's error against the nominal cell's."""
 NOMINAL_MU = PhysicsConfig().precision_friction
 CHANNELS = (ch.TCP_POSITION[2], *ch.F_EXT[:3])

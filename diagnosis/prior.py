@@ -12,6 +12,7 @@ updated by any correction, plus the new ones), so it can be the next run's plant
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -80,8 +81,8 @@ class PriorFamily:
 
     def _correction(self, e: Effect) -> Effect:
         f = self.fixed[e.name]
-        return Effect(e.name, f"{e.summary}, correction to {self.model.path}", e.param_names,
-                      e.units, np.zeros_like(f), e.lower - f, e.upper - f)
+        return replace(e, summary=f"{e.summary}, correction to {self.model.path}",
+                       x0=np.zeros_like(f), lower=e.lower - f, upper=e.upper - f)
 
     def _merged(self, params: Mapping[str, Vec]) -> dict[str, Vec]:
         """The blocks fitted now (corrections added to the prior), then the prior's others."""

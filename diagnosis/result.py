@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from serpar.diagnosis.family import LocateRow
+from serpar.diagnosis.residual import ResidualCheck
 
 NO_MISSING_PHYSICS = "no missing physics found beyond noise"
 
@@ -62,14 +63,28 @@ class Finding:
     delta_chi2_heldout: float
     of_remaining: float = 0.0
     """Share of the excess that the effects ranked before it left, which this one removed."""
+    established: bool = True
+    """Admissible, on no search bound, needed again on resampled folds, material
+    (:mod:`serpar.diagnosis.stability`); else only suspected."""
+    reasons: tuple[str, ...] = ()
+    """Why it is only suspected."""
+    stability: float | None = None
+    """Share of the resampled folds on which it earned its parameters again."""
+    note: str = ""
+    """A word on how to read the values, e.g. a negative payload as a nominal-model excess."""
 
     def words(self) -> str:
         shown = sorted(self.params, key=lambda p: -abs(p.value) / max(p.std, 1e-300))[:6]
         more = len(self.params) - len(shown)
         rest = (f" ({100 * self.of_remaining:.0f} % of what the effects above left)"
                 if self.rank > 1 else "")
-        return (f"{self.summary}: explains {100 * self.explained:.1f} % of the held-out "
-                f"residual{rest}; " + "; ".join(p.words() for p in shown)
+        held = (f"; needed on {100 * self.stability:.0f} % of resampled folds"
+                if self.stability is not None else "")
+        status = ("" if self.established
+                  else f"suspected, not established ({'; '.join(self.reasons)}): ")
+        note = f" ({self.note})" if self.note else ""
+        return (f"{status}{self.summary}{note}: explains {100 * self.explained:.1f} % of the "
+                f"held-out residual{rest}{held}; " + "; ".join(p.words() for p in shown)
                 + (f"; and {more} more parameter(s)" if more > 0 else ""))
 
     def as_dict(self) -> dict[str, object]:
@@ -77,6 +92,8 @@ class Finding:
                 "explained_share": self.explained, "share_of_remaining": self.of_remaining,
                 "delta_bic_train": self.delta_bic_train,
                 "delta_chi2_heldout": self.delta_chi2_heldout,
+                "established": self.established, "reasons": list(self.reasons),
+                "resampled_frequency": self.stability, "note": self.note,
                 "params": [p.as_dict() for p in self.params]}
 
 
@@ -102,10 +119,21 @@ class Diagnosis:
     heldout_before: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     heldout_after: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     heldout_rows: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    residual: ResidualCheck | None = None
+    """What the held-out residual after the fit of the established effects looks like."""
+
+    @property
+    def established(self) -> tuple[Finding, ...]:
+        return tuple(f for f in self.findings if f.established)
+
+    @property
+    def suspected(self) -> tuple[Finding, ...]:
+        return tuple(f for f in self.findings if not f.established)
 
     @property
     def top_effect(self) -> str | None:
-        return self.findings[0].effect if self.findings else None
+        """The first established finding (a suspected one is not a finding)."""
+        return self.established[0].effect if self.established else None
 
     @property
     def no_missing_physics(self) -> bool:
@@ -123,4 +151,7 @@ class Diagnosis:
                 "heldout_rms_whitened_after": self.heldout_rms_after,
                 "heldout_p_after": self.heldout_p_after,
                 "explained_share": self.explained, "wall_s": self.wall_s,
+                "established": [f.effect for f in self.established],
+                "suspected": [f.effect for f in self.suspected],
+                "residual_check": None if self.residual is None else self.residual.as_dict(),
                 "model": self.model}

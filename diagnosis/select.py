@@ -24,17 +24,28 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.stats
 from threadpoolctl import threadpool_limits
 
-from serpar.diagnosis.family import Family
-from serpar.diagnosis.fit import Fit, blocks_of, fit_model
+from serpar.diagnosis.family import Effect, Family
+from serpar.diagnosis.fit import Fit, blocks_of, earns, fit_model
 from serpar.diagnosis.locate import chi2_p
+from serpar.diagnosis.residual import check_residual
 from serpar.diagnosis.result import (
     NO_MISSING_PHYSICS,
     CandidateScore,
     Diagnosis,
     Finding,
     ParamEstimate,
+)
+from serpar.diagnosis.stability import (
+    N_FOLDS,
+    Assessment,
+    assess,
+    block_of,
+    combined_std,
+    fit_identified,
+    folds,
 )
 from serpar.errors import IdentificationError
 
@@ -46,53 +57,49 @@ class SelectConfig:
     alpha: float = 0.01
     """Significance at which the held-out residual is still "beyond noise"."""
     max_effects: int = 3
+    folds: int = N_FOLDS
+    """Resampled folds on which a selected effect must hold up (0: no resampling; every
+    selected effect is then reported as found, as a plain forward selection would)."""
 
     def __post_init__(self) -> None:
         if not 0 < self.alpha < 1:
             raise IdentificationError(f"SelectConfig.alpha must be in (0, 1), got {self.alpha}")
         if self.max_effects < 0:
             raise IdentificationError("SelectConfig.max_effects must be >= 0")
+        if self.folds < 0 or self.folds == 1:
+            raise IdentificationError(f"SelectConfig.folds={self.folds}: 0 (off) or >= 2")
 
 
 def at_noise_floor(fit: Fit, alpha: float) -> bool:
     """Held-out chi-square consistent with noise at significance ``alpha``."""
     if fit.n_heldout == 0:
         return False
-    import scipy.stats
-
     return float(scipy.stats.chi2.sf(fit.heldout_chi2, fit.n_heldout)) >= alpha
-
-
-def earns(current: Fit, new: Fit) -> tuple[float, float, bool]:
-    """(training BIC change, held-out chi^2 drop, whether the extra parameters are earned)."""
-    k = new.n_params - current.n_params
-    d_bic = new.bic - current.bic
-    d_held = current.heldout_chi2 - new.heldout_chi2
-    ok = k > 0 and d_bic < 0 and d_held > k * float(np.log(max(new.n_heldout, 2)))
-    return d_bic, d_held, ok
 
 
 def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
                    cfg: SelectConfig, report: Progress | None = None
-                   ) -> tuple[list[Fit], list[CandidateScore]]:
-    """The sequence of fits (baseline first, then one added effect per step) and the score of
-    every candidate tried at every step."""
+                   ) -> tuple[list[Fit], list[CandidateScore], dict[str, Effect]]:
+    """The sequence of fits (baseline first, then one added effect per step), the score of
+    every candidate tried at every step, and the selected effects with the parameters the
+    data do not identify held at zero (:func:`~serpar.diagnosis.stability.fit_identified`)."""
     say = report or (lambda _msg: None)
     say("baseline")
     path = [fit_model(family, (), train, heldout)]
     scores: list[CandidateScore] = []
+    fixed: dict[str, Effect] = {}
     step = 0
     while step < cfg.max_effects and not at_noise_floor(path[-1], cfg.alpha):
         step += 1
         current = path[-1]
-        best: Fit | None = None
+        best: tuple[Fit, dict[str, Effect]] | None = None
         for effect in family.effects:
             if effect.name in current.active:
                 continue
             say(effect.name)
             try:
-                new = fit_model(family, current.active + (effect.name,), train, heldout,
-                                current.params)
+                new, new_fixed = fit_identified(family, current.active + (effect.name,), train,
+                                                heldout, current.params, fixed)
             except (np.linalg.LinAlgError, ValueError) as exc:
                 # one candidate that cannot be fitted here is a finding, not a crash
                 say(f"{effect.name} failed: {exc}")
@@ -100,12 +107,13 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
             d_bic, d_held, ok = earns(current, new)
             scores.append(CandidateScore(step, effect.name, effect.n_params, d_bic, d_held,
                                          new.heldout_rms, ok))
-            if ok and (best is None or new.heldout_chi2 < best.heldout_chi2):
-                best = new
+            if ok and (best is None or new.heldout_chi2 < best[0].heldout_chi2):
+                best = new, new_fixed
         if best is None:
             break
-        path.append(best)
-    return path, scores
+        path.append(best[0])
+        fixed = best[1]
+    return path, scores, fixed
 
 
 def _excess(fit: Fit) -> float:
@@ -127,7 +135,8 @@ def diagnose(family: Family, seed: int = 0, cfg: SelectConfig | None = None,
     if cfg is None:
         # a family whose recordings hold several independent parts (an episode: the arm's
         # dynamics and its insertions) may allow more effects; each must still earn its place
-        cfg = SelectConfig(max_effects=getattr(family, "max_effects", SelectConfig.max_effects))
+        cfg = SelectConfig(max_effects=getattr(family, "max_effects", SelectConfig.max_effects),
+                           folds=getattr(family, "n_folds", SelectConfig.folds))
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(family, seed, cfg, report)
 
@@ -135,6 +144,9 @@ def diagnose(family: Family, seed: int = 0, cfg: SelectConfig | None = None,
 def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | None
               ) -> Diagnosis:
     t0 = time.perf_counter()
+    # the folds first: a family's split may set state (episode tare knots) that the final
+    # fits below must see from the main split
+    splits = folds(family, cfg.folds) if cfg.folds else []
     train, heldout = family.split(np.random.default_rng(seed))
     train, heldout = np.asarray(train, np.int64), np.asarray(heldout, np.int64)
     if train.size == 0 or heldout.size == 0:
@@ -142,45 +154,92 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
                                   f"{heldout.size} held-out rows; both must be non-empty")
     if np.intersect1d(train, heldout).size:
         raise IdentificationError(f"{family.kind}: training and held-out rows overlap")
-    path, scores = forward_select(family, train, heldout, cfg, report)
+    path, scores, fixed = forward_select(family, train, heldout, cfg, report)
     base, final = path[0], path[-1]
+    shares = _shares(path)
+    if report and splits and final.active:
+        report(f"resampling {len(splits)} folds")
+    # the model (and the file written from it) holds the established effects only
+    kept, assessed, fixed = assess(family, final, {n: s[1] for n, s in shares.items()}, splits,
+                                   train, heldout, fixed)
+    findings = _findings(family, path, shares, assessed, fixed)
     every = np.concatenate([train, heldout])
     before = family.residual(base.params, heldout)
-    after = family.residual(final.params, heldout)
+    after = family.residual(kept.params, heldout)
     excess0 = _excess(base)
-    findings = []
-    for rank, (prev, fit) in enumerate(itertools.pairwise(path), start=1):
-        name = fit.active[-1]
-        share = (_excess(prev) - _excess(fit)) / excess0 if excess0 > 0 else 0.0
-        d_bic, d_held, _ = earns(prev, fit)
-        summary = next(e.summary for e in family.effects if e.name == name)
-        # parameters and uncertainty from the final model (all selected effects together)
-        rest = (_excess(prev) - _excess(fit)) / _excess(prev) if _excess(prev) > 0 else 0.0
-        findings.append(Finding(rank, name, summary, _estimates(family, final, name),
-                                float(np.clip(share, 0.0, 1.0)), d_bic, d_held,
-                                float(np.clip(rest, 0.0, 1.0))))
-    if len(path) == 1 and at_noise_floor(base, cfg.alpha):
-        verdict = NO_MISSING_PHYSICS
-    elif len(path) == 1:
-        verdict = ("the model misses something beyond noise, but no candidate effect earns "
-                   "its parameters on held-out data")
-    else:
-        verdict = "missing physics: " + ", ".join(f.summary for f in findings)
-    baseline = (_estimates(family, final, family.baseline.name)
+    residual = check_residual(family, heldout, after, cfg.alpha)
+    verdict = _verdict(findings, base, cfg, residual.words)
+    baseline = (_estimates(family, kept, family.baseline.name)
                 if family.baseline is not None else ())
-    model = {name: {"values": [float(v) for v in final.params[name]],
-                    "std": [float(s) for s in final.std[name]],
-                    "names": list(next(b for b in blocks_of(family, final.active)
-                                       if b.name == name).param_names)}
-             for name in final.params}
-    explained = (excess0 - _excess(final)) / excess0 if excess0 > 0 else 0.0
+    model = {name: {"values": [float(v) for v in kept.params[name]],
+                    "std": [float(s) for s in combined_std(
+                        kept, name, assessed[name].resampled if name in assessed else None)],
+                    "names": list(block_of(family, kept.active, name, fixed).param_names)}
+             for name in kept.params}
+    explained = (excess0 - _excess(kept)) / excess0 if excess0 > 0 else 0.0
     return Diagnosis(
         kind=family.kind, verdict=verdict, findings=tuple(findings), candidates=tuple(scores),
         locate_before=tuple(family.locate(every, family.residual(base.params, every))),
-        locate_after=tuple(family.locate(every, family.residual(final.params, every))),
+        locate_after=tuple(family.locate(every, family.residual(kept.params, every))),
         baseline_params=baseline, n_train_rows=int(train.size),
         n_heldout_rows=int(heldout.size), heldout_rms_before=base.heldout_rms,
-        heldout_rms_after=final.heldout_rms, heldout_p_after=chi2_p(after),
+        heldout_rms_after=kept.heldout_rms, heldout_p_after=chi2_p(after),
         explained=float(np.clip(explained, 0.0, 1.0)), wall_s=time.perf_counter() - t0,
-        model={"kind": family.kind, "effects": list(final.active), "params": model},
-        heldout_before=before, heldout_after=after, heldout_rows=heldout)
+        model={"kind": family.kind, "effects": list(kept.active), "params": model},
+        heldout_before=before, heldout_after=after, heldout_rows=heldout, residual=residual)
+
+
+def _shares(path: list[Fit]) -> dict[str, tuple[float, float]]:
+    """Per selected effect: the share of the baseline's excess held-out residual it removed
+    when it was added, and the share of what the effects before it left."""
+    excess0, out = _excess(path[0]), {}
+    for prev, fit in itertools.pairwise(path):
+        removed = _excess(prev) - _excess(fit)
+        out[fit.active[-1]] = (float(np.clip(removed / excess0 if excess0 > 0 else 0.0, 0, 1)),
+                               float(np.clip(removed / _excess(prev) if _excess(prev) > 0 else 0.0,
+                                             0, 1)))
+    return out
+
+
+def _findings(family: Family, path: list[Fit], shares: dict[str, tuple[float, float]],
+              assessed: dict[str, Assessment], fixed: dict[str, Effect]) -> list[Finding]:
+    out = []
+    for rank, (prev, fit) in enumerate(itertools.pairwise(path), start=1):
+        name = fit.active[-1]
+        d_bic, d_held, _ = earns(prev, fit)
+        a = assessed[name]
+        effect = block_of(family, a.fit.active, name, fixed)
+        values = a.fit.params[name]
+        std = combined_std(a.fit, name, a.resampled)
+        # parameters and uncertainty from the model the effect was last judged in
+        estimates = tuple(ParamEstimate(p, float(v), float(s), u) for i, (p, v, s, u) in
+                          enumerate(zip(effect.param_names, values, std, effect.units))
+                          if i not in effect.fixed)
+        notes = []
+        if effect.excess_words and values[0] < 0:
+            notes.append(effect.excess_words.format(
+                value=f"{-values[0]:.3g} {effect.units[0]}".rstrip()))
+        if effect.fixed:
+            notes.append("not identified by these data, held at 0: "
+                         + ", ".join(effect.param_names[i] for i in effect.fixed))
+        out.append(Finding(rank, name, effect.summary, estimates, shares[name][0], d_bic, d_held,
+                           shares[name][1], established=not a.reasons, reasons=a.reasons,
+                           stability=None if a.resampled is None else a.resampled.frequency,
+                           note="; ".join(notes)))
+    return out
+
+
+def _verdict(findings: list[Finding], base: Fit, cfg: SelectConfig, residual_words: str) -> str:
+    if not findings and at_noise_floor(base, cfg.alpha):
+        return NO_MISSING_PHYSICS
+    established = [f.summary for f in findings if f.established]
+    suspected = [f"{f.summary} ({'; '.join(f.reasons)})" for f in findings if not f.established]
+    if not findings:
+        head = "no candidate effect earns its parameters on held-out data"
+    elif established:
+        head = "missing physics: " + ", ".join(established)
+    else:
+        head = "no finding holds up"
+    if suspected:
+        head += "; suspected, not established: " + ", ".join(suspected)
+    return f"{head}. {residual_words[0].upper()}{residual_words[1:]}"

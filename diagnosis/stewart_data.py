@@ -69,6 +69,9 @@ class StewartHolds:
     config: dict[str, object]
     """Keyword arguments of the nominal StewartConfig."""
     load: Load
+    scatter_pos: float = float("nan")
+    """Per sample and axis [m]: the pooled scatter of the position samples about their hold's
+    mean, the noise the data themselves show (nan with too few samples)."""
 
     @property
     def n(self) -> int:
@@ -183,8 +186,11 @@ def _holds(t: Vec, cmd: Vec, legs: Vec, pos: Vec, quat: Vec, sigma_pos: float,
     used = rest & np.isin(run, keep)
     rot = quat_to_rot(quat)
     out: dict[str, list] = {k: [] for k in ("time", "legs", "cmd", "pos", "rot", "count")}
+    ss, dof = 0.0, 0
     for r in keep:
         m = used & (run == r)
+        ss += float(np.sum((pos[m] - pos[m].mean(axis=0)) ** 2))
+        dof += 3 * (int(m.sum()) - 1)
         out["time"].append(t[m].mean() - t[0])
         out["legs"].append(legs[m].mean(axis=0))
         out["cmd"].append(cmd[m].mean(axis=0))
@@ -196,4 +202,5 @@ def _holds(t: Vec, cmd: Vec, legs: Vec, pos: Vec, quat: Vec, sigma_pos: float,
     return StewartHolds(np.array(out["time"]), np.array(out["legs"]), np.array(out["cmd"]),
                         np.array(out["pos"]), np.array(out["rot"]),
                         np.array(out["count"], np.int64), sigma_pos, sigma_rot, sigma_leg,
-                        len(t), int(len(t) - used.sum()), cfg_kwargs, load)
+                        len(t), int(len(t) - used.sum()), cfg_kwargs, load,
+                        float(np.sqrt(ss / dof)) if dof >= 30 else float("nan"))

@@ -67,7 +67,7 @@ def full_effects(duration_s: float) -> list[Effect]:
                           np.zeros(1), np.full(1, -k), np.full(1, k)))
     out.append(Effect(COMPLIANCE, "axial leg compliance under the platform's load",
                       tuple(f"c{i}" for i in legs), ("m/N",) * N_LEGS, np.zeros(N_LEGS),
-                      np.full(N_LEGS, -COMPLIANCE_BOUND), np.full(N_LEGS, COMPLIANCE_BOUND)))
+                      np.zeros(N_LEGS), np.full(N_LEGS, COMPLIANCE_BOUND), physical_lower=True))
     out.append(Effect(ENCODER, "leg encoder zero offsets", tuple(f"o{i}" for i in legs),
                       ("m",) * N_LEGS, np.zeros(N_LEGS), np.full(N_LEGS, -ENCODER_BOUND_M),
                       np.full(N_LEGS, ENCODER_BOUND_M)))
@@ -82,11 +82,6 @@ def geometry_flat_index(name: str) -> int:
     raise ValueError(f"not a geometry parameter: {name!r}")
 
 
-def _restrict(e: Effect, keep: NDArray[np.int64]) -> Effect:
-    return Effect(e.name, e.summary, tuple(e.param_names[i] for i in keep),
-                  tuple(e.units[i] for i in keep), e.x0[keep], e.lower[keep], e.upper[keep])
-
-
 def candidate_effects(fam: StewartFamily, rows: NDArray[np.int64]) -> tuple[Effect, ...]:
     """The effects restricted to what the given rows' poses can identify (columns of the
     exact Jacobian at the nominal model)."""
@@ -96,7 +91,7 @@ def candidate_effects(fam: StewartFamily, rows: NDArray[np.int64]) -> tuple[Effe
         jac = fam.jacobian({effect.name: effect.x0}, rows)
         keep = independent_columns(jac, 0)
         if keep.size:
-            out.append(_restrict(effect, keep))
+            out.append(effect.restricted(keep))
     for e in out:
         fam.register(e)
     return tuple(out)

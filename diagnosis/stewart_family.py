@@ -152,6 +152,13 @@ class StewartFamily:
         return out.reshape(n * 6, -1)
 
     # -- Family protocol -------------------------------------------------------------------
+    def noise_ratio(self, rows: NDArray[np.int64], whitened: Vec) -> tuple[float, str] | None:
+        """The position noise the samples show about their hold's mean, over the stated one."""
+        s = self.h.scatter_pos
+        if not (np.isfinite(s) and self.h.sigma_pos > 0):
+            return None
+        return s / self.h.sigma_pos, "scatter of the samples within each rest hold"
+
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """The first 60 % of the holds in time train, the last 40 % are held out."""
         order = np.argsort(self.h.time, kind="stable")
@@ -191,7 +198,7 @@ class StewartFamily:
 
     # -- the updated model for serpar run --------------------------------------------------
     def export(self, params: Mapping[str, Vec], stem: Path) -> list[Path]:
-        """With geometry or encoder offsets selected: ``<stem>.stewart_params.json`` in the
+        """With geometry or encoder offsets established: ``<stem>.stewart_params.json`` in the
         calibration/stewart_params.py format (``stewart_calibration: <file>`` of ``serpar run``); an
         encoder offset o is the leg-length error dl = -o. Other effects have no place in it."""
         if GEOMETRY not in params and ENCODER not in params:

@@ -30,6 +30,7 @@ from scipy.interpolate import CubicSpline
 from serpar.diagnosis.arm_static_effects import independent_columns
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows
+from serpar.diagnosis.residual import consecutive_noise_ratio
 from serpar.diagnosis.stewart_effects import (
     COLUMNS,
     COMPLIANCE,
@@ -108,9 +109,7 @@ class StewartMotionFamily:
             self.register(e)
             keep = independent_columns(self.jacobian({e.name: e.x0}, rows), 0)
             if keep.size:
-                out.append(Effect(e.name, e.summary, tuple(e.param_names[i] for i in keep),
-                                  tuple(e.units[i] for i in keep), e.x0[keep], e.lower[keep],
-                                  e.upper[keep]))
+                out.append(e.restricted(keep))
         for e in out:
             self.register(e)
         return tuple(out) + latency_effects()
@@ -193,6 +192,11 @@ class StewartMotionFamily:
         return out.reshape(n * 12, -1)
 
     # -- Family protocol -------------------------------------------------------------------
+    def noise_ratio(self, rows: NDArray[np.int64], whitened: Vec) -> tuple[float, str] | None:
+        """The data's noise over the stated sigma, from sample-to-sample differences."""
+        r = consecutive_noise_ratio(rows, whitened, 12)
+        return None if r is None else (r, "sample-to-sample differences")
+
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """The first 60 % of the samples in time train, the last 40 % are held out."""
         cut = round((1.0 - HOLDOUT_SHARE) * self.n_samples)

@@ -92,16 +92,19 @@ def test_heldout_rms_after_the_fit_near_noise_floor(episodes) -> None:
                                        "half a 0.1 ms substep early and its torque sensors read "
                                        "half a substep late (MuJoCo's leapfrog step; the arm "
                                        "twin compensates, the cell does not), which the "
-                                       "diagnosis names as latency / sensor timing of ~50 us")
+                                       "diagnosis selects as latency / sensor timing of ~50 us "
+                                       "(suspected, not established)")
 def test_frictionless_episode_says_no_missing_physics(episodes) -> None:
     _, _, diag = episodes["none"]
     assert diag.no_missing_physics, diag.verdict
 
 
 def test_frictionless_episode_shows_only_the_cells_substep_timing(episodes) -> None:
-    """What a frictionless episode does show is timing below one 0.1 ms physics substep."""
+    """What a frictionless episode does show is timing below one 0.1 ms physics substep: the
+    selection takes it first, and it is not a finding that holds up on resampled folds."""
     _, _, diag = episodes["none"]
-    assert diag.top_effect in ("latency", "sensor_timing"), diag.verdict
+    assert diag.findings[0].effect in ("latency", "sensor_timing"), diag.verdict
+    assert diag.established == (), diag.verdict
     for f in diag.findings:
         if f.effect in ("latency", "sensor_timing"):
             assert abs(f.params[0].value) < 1e-4, f

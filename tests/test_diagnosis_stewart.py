@@ -298,11 +298,11 @@ def test_twin_then_diagnose_writes_stewart_parameters(tmp_path, capsys) -> None:
 
 
 def test_blind_bench_draws_stewart_trials() -> None:
-    from serpar.checks.blind_bench import plan
+    from serpar.checks.blind_bench import WRONG, plan
 
     trials = plan(12, 0, ("stewart",))
     assert {d for d, *_ in trials} == {"stewart"}
-    assert {e for _, e, *_ in trials} <= {"none", *EFFECTS}
+    assert {e for _, e, *_ in trials} <= {"none", WRONG, *EFFECTS}
 
 
 def test_geometry_parameter_names_round_trip() -> None:

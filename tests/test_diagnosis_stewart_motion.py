@@ -179,8 +179,8 @@ def test_bad_input_is_one_line_naming_the_problem(results, change, message: str)
 
 
 def test_blind_bench_draws_stewart_motion_trials() -> None:
-    from serpar.checks.blind_bench import plan
+    from serpar.checks.blind_bench import WRONG, plan
 
     trials = plan(12, 0, ("stewart_motion",))
     assert {d for d, *_ in trials} == {"stewart_motion"}
-    assert {e for _, e, *_ in trials} <= {"none", *EFFECTS}
+    assert {e for _, e, *_ in trials} <= {"none", WRONG, *EFFECTS}

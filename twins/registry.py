@@ -9,6 +9,7 @@ and optionally ``MAGNITUDE_RANGE: dict[str, (lo, hi)]`` (the blind bench's draw;
 from __future__ import annotations
 
 import importlib
+from dataclasses import replace
 from types import ModuleType
 
 from serpar.errors import ConfigError
@@ -55,8 +56,18 @@ def magnitude_range(effect: str, domain: str) -> tuple[float, float]:
 
 
 def make_twin(effect: str | None, magnitude: float | None, seed: int,
-              domain: str | None = None) -> tuple[Recording, dict[str, object]]:
-    """The recording of a "real" plant with ``effect`` (None: none) and the answer."""
+              domain: str | None = None, sigma_error: float = 1.0
+              ) -> tuple[Recording, dict[str, object]]:
+    """The recording of a "real" plant with ``effect`` (None: none) and the answer.
+    ``sigma_error``: the recording states its noise sigma this many times too small (the
+    instrument is noisier than its data sheet), 1 = stated correctly."""
+    if not 0.1 <= sigma_error <= 10:
+        raise ConfigError(f"sigma_error {sigma_error}: valid 0.1..10 (1 = the stated noise is right)")
     dom = domain_of(effect, domain)
     rec, answer = domain_module(dom).make_twin(effect, magnitude, seed)
+    if sigma_error != 1.0:
+        meta = replace(rec.meta, noise_sigma={k: v / sigma_error
+                                              for k, v in rec.meta.noise_sigma.items()})
+        rec = replace(rec, meta=meta)
+        answer = {**answer, "stated_sigma_optimistic_by": sigma_error}
     return rec, {"domain": dom, **answer}
