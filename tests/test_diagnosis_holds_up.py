@@ -198,3 +198,7 @@ def test_twin_sigma_error_is_validated() -> None:
     k = next(iter(base.meta.noise_sigma))
     assert rec.meta.noise_sigma[k] == pytest.approx(base.meta.noise_sigma[k] / 2)
     assert replace(rec.meta, noise_sigma=base.meta.noise_sigma) == base.meta
+    static, _ = make_twin(None, None, 0, "arm_static", sigma_error=2.0)
+    nominal, _ = make_twin(None, None, 0, "arm_static")
+    assert (static.meta.model["measurements"]["sigma_m"]
+            == pytest.approx(nominal.meta.model["measurements"]["sigma_m"] / 2))

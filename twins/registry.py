@@ -66,8 +66,13 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int,
     dom = domain_of(effect, domain)
     rec, answer = domain_module(dom).make_twin(effect, magnitude, seed)
     if sigma_error != 1.0:
-        meta = replace(rec.meta, noise_sigma={k: v / sigma_error
-                                              for k, v in rec.meta.noise_sigma.items()})
+        model = dict(rec.meta.model)
+        measurements = model.get("measurements")
+        if isinstance(measurements, dict) and "sigma_m" in measurements:  # static sets
+            model["measurements"] = {**measurements,
+                                     "sigma_m": float(measurements["sigma_m"]) / sigma_error}
+        meta = replace(rec.meta, model=model,
+                       noise_sigma={k: v / sigma_error for k, v in rec.meta.noise_sigma.items()})
         rec = replace(rec, meta=meta)
         answer = {**answer, "stated_sigma_optimistic_by": sigma_error}
     return rec, {"domain": dom, **answer}
