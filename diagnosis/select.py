@@ -58,8 +58,8 @@ class SelectConfig:
     """Significance at which the held-out residual is still "beyond noise"."""
     max_effects: int = 3
     folds: int = N_FOLDS
-    """Resampled folds on which a selected effect must hold up (0: no resampling; every
-    selected effect is then reported as found, as a plain forward selection would)."""
+    """Resampled folds on which a selected effect must hold up (0: no resampling; a selected
+    effect then has only to be off its search bounds and material to be reported as found)."""
 
     def __post_init__(self) -> None:
         if not 0 < self.alpha < 1:
@@ -135,8 +135,7 @@ def diagnose(family: Family, seed: int = 0, cfg: SelectConfig | None = None,
     if cfg is None:
         # a family whose recordings hold several independent parts (an episode: the arm's
         # dynamics and its insertions) may allow more effects; each must still earn its place
-        cfg = SelectConfig(max_effects=getattr(family, "max_effects", SelectConfig.max_effects),
-                           folds=getattr(family, "n_folds", SelectConfig.folds))
+        cfg = SelectConfig(max_effects=getattr(family, "max_effects", SelectConfig.max_effects))
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(family, seed, cfg, report)
 
