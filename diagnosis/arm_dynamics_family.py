@@ -18,8 +18,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_effects import BASELINE, EFFECTS, EffectModels
+from serpar.diagnosis.arm_dynamics_empirical import arm_library
 from serpar.diagnosis.arm_dynamics_signals import SmoothingConfig, read_arm_series
 from serpar.diagnosis.arm_dynamics_terms import Terms, compute_terms, row_sigma
+from serpar.diagnosis.empirical import BasisGroup
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows
 from serpar.diagnosis.residual import consecutive_noise_ratio
@@ -108,6 +110,10 @@ class ArmDynamicsFamily:
         sensor noise survives them, the slow residual of missing physics cancels)."""
         r = consecutive_noise_ratio(rows, whitened, len(CHANNELS))
         return None if r is None else (r, "sample-to-sample differences")
+
+    def empirical_library(self) -> list[BasisGroup]:
+        """Shapes in each joint's angle, velocity and time (diagnosis/arm_dynamics_empirical.py)."""
+        return arm_library(self.terms)
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         block = np.floor((self.terms.time - self.terms.time[0]) / self.cfg.block_s).astype(int)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from serpar.diagnosis.empirical import EmpiricalTerm
 from serpar.diagnosis.family import LocateRow
 from serpar.diagnosis.residual import ResidualCheck
 
@@ -121,6 +122,9 @@ class Diagnosis:
     heldout_rows: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     residual: ResidualCheck | None = None
     """What the held-out residual after the fit of the established effects looks like."""
+    empirical: EmpiricalTerm | None = None
+    """What is left, characterised over the family's basis library (None: not tried: the
+    residual passed the noise test, looked like noise, or the family has no library)."""
 
     @property
     def established(self) -> tuple[Finding, ...]:
@@ -154,4 +158,5 @@ class Diagnosis:
                 "established": [f.effect for f in self.established],
                 "suspected": [f.effect for f in self.suspected],
                 "residual_check": None if self.residual is None else self.residual.as_dict(),
+                "empirical": None if self.empirical is None else self.empirical.as_dict(),
                 "model": self.model}

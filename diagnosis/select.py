@@ -21,12 +21,14 @@ from __future__ import annotations
 import itertools
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.stats
 from threadpoolctl import threadpool_limits
 
+from serpar.diagnosis.empirical import EmpiricalTerm, characterise
+from serpar.diagnosis.empirical_refit import model_refit, outweighed
 from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.fit import Fit, blocks_of, earns, fit_model
 from serpar.diagnosis.locate import chi2_p
@@ -167,7 +169,32 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
     after = family.residual(kept.params, heldout)
     excess0 = _excess(base)
     residual = check_residual(family, heldout, after, cfg.alpha)
-    verdict = _verdict(findings, base, cfg, residual.words)
+    empirical = None
+    library = getattr(family, "empirical_library", None)
+    if callable(library) and not residual.passes and residual.structured is not False:
+        if report:
+            report("characterising what is left")
+        n_channels = after.size // max(heldout.size, 1)
+        groups = library()
+        empirical = characterise(groups, model_refit(family, kept, fixed, groups, n_channels),
+                                 train, heldout, splits, n_channels, every)
+        chosen = [groups.index(t.group) for t in empirical.terms]
+        stand_ins = outweighed(family, kept, fixed, groups, chosen, n_channels, train, heldout)
+        if stand_ins:
+            # an established effect that only stood in for the physics the empirical term
+            # describes is not a finding: demote it, refit the rest, characterise again
+            why = "it no longer earns its parameters once the empirical term is in the model"
+            findings = [replace(f, established=False, reasons=f.reasons + (why,))
+                        if f.effect in stand_ins else f for f in findings]
+            kept, fixed = fit_identified(family, tuple(a for a in kept.active
+                                                       if a not in stand_ins),
+                                         train, heldout, kept.params, fixed)
+            after = family.residual(kept.params, heldout)
+            residual = check_residual(family, heldout, after, cfg.alpha)
+            empirical = characterise(groups, model_refit(family, kept, fixed, groups,
+                                                         n_channels),
+                                     train, heldout, splits, n_channels, every)
+    verdict = _verdict(findings, base, cfg, residual.words, empirical)
     baseline = (_estimates(family, kept, family.baseline.name)
                 if family.baseline is not None else ())
     model = {name: {"values": [float(v) for v in kept.params[name]],
@@ -184,8 +211,11 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
         n_heldout_rows=int(heldout.size), heldout_rms_before=base.heldout_rms,
         heldout_rms_after=kept.heldout_rms, heldout_p_after=chi2_p(after),
         explained=float(np.clip(explained, 0.0, 1.0)), wall_s=time.perf_counter() - t0,
-        model={"kind": family.kind, "effects": list(kept.active), "params": model},
-        heldout_before=before, heldout_after=after, heldout_rows=heldout, residual=residual)
+        model={"kind": family.kind, "effects": list(kept.active), "params": model,
+               **({"empirical": [t.as_dict() for t in empirical.terms]}
+                  if empirical is not None and empirical.terms else {})},
+        heldout_before=before, heldout_after=after, heldout_rows=heldout, residual=residual,
+        empirical=empirical)
 
 
 def _shares(path: list[Fit]) -> dict[str, tuple[float, float]]:
@@ -228,7 +258,8 @@ def _findings(family: Family, path: list[Fit], shares: dict[str, tuple[float, fl
     return out
 
 
-def _verdict(findings: list[Finding], base: Fit, cfg: SelectConfig, residual_words: str) -> str:
+def _verdict(findings: list[Finding], base: Fit, cfg: SelectConfig, residual_words: str,
+             empirical: EmpiricalTerm | None = None) -> str:
     if not findings and at_noise_floor(base, cfg.alpha):
         return NO_MISSING_PHYSICS
     established = [f.summary for f in findings if f.established]
@@ -241,4 +272,10 @@ def _verdict(findings: list[Finding], base: Fit, cfg: SelectConfig, residual_wor
         head = "no finding holds up"
     if suspected:
         head += "; suspected, not established: " + ", ".join(suspected)
-    return f"{head}. {residual_words[0].upper()}{residual_words[1:]}"
+    tail = ""
+    if empirical is not None and empirical.terms:
+        tail = (". What is left, characterised as an empirical term (a hypothesis, not a "
+                f"finding): {empirical.words()}")
+    elif empirical is not None:
+        tail = f". Outside the library: {empirical.words()}"
+    return f"{head}. {residual_words[0].upper()}{residual_words[1:]}{tail}"

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from serpar.calibration.stewart_params import save_stewart_parameters
+from serpar.diagnosis.empirical import BasisGroup
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows
 from serpar.diagnosis.stewart_data import StewartHolds, read_stewart
@@ -34,6 +35,7 @@ from serpar.diagnosis.stewart_effects import (
     candidate_effects,
     geometry_flat_index,
 )
+from serpar.diagnosis.stewart_empirical import stewart_library
 from serpar.errors import IdentificationError
 from serpar.sim.recording import Recording
 from serpar.sim.stewart import StewartConfig
@@ -152,6 +154,10 @@ class StewartFamily:
         return out.reshape(n * 6, -1)
 
     # -- Family protocol -------------------------------------------------------------------
+    def empirical_library(self) -> list[BasisGroup]:
+        """One leg at a time, drifting in time or in proportion to its stroke."""
+        return stewart_library(self, StewartConfig(**self.h.config).l_min)  # type: ignore[arg-type]
+
     def noise_ratio(self, rows: NDArray[np.int64], whitened: Vec) -> tuple[float, str] | None:
         """The position noise the samples show about their hold's mean, over the stated one."""
         s = self.h.scatter_pos

@@ -19,9 +19,18 @@ Magnitude per effect (drawn from the range in :data:`MAGNITUDE_RANGE` when not g
 | latency | actuation delay [s] | — (0.1 ms resolution) |
 | sensor_timing | how late the torque sensors read against the encoders [s] | — (0.1 ms resolution; the simulated cell's own sensors read half a substep late, ~0.05 ms) |
 | encoder_offset | largest offset [rad] | offsets of joints 2-6 (joint 1's is invisible to dynamics: gravity is along its axis) |
+| stribeck_friction | multiple of a real Panda's friction, as joint_friction | joint_friction's Coulomb + viscous, plus a Stribeck excess (Fs - Fc) exp(-(v/vs)^2) against the motion: Fs/Fc 1.5-2.5, vs 0.02-0.08 rad/s per joint |
+| torque_ripple | amplitude A [N m] of A sin(2 pi q_j / P + phi) in one drive | the joint (2-6), the period P (10-45 deg), the phase |
+| encoder_scale | largest relative scale error abs(s) (encoder reads q (1 + s) about its zero, dq too) | its joint (2-4), the sign; half the time a second, smaller one on another joint of 2-6 |
+
+The last three (:data:`OUT_OF_LIBRARY`) have no candidate in the diagnosis library: it should
+leave them as structured residual that no library effect explains. Their answers carry a
+``signature``: the channels the residual shows in, the variables it follows, in words.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 import mujoco
 import numpy as np
@@ -33,10 +42,12 @@ from serpar.sim.arm import JOINT_NAMES, N_JOINTS, PANDA_COULOMB_FRICTION
 from serpar.sim.physics import PhysicsConfig
 from serpar.sim.plants.moving_panda import Reality, SensorNoise, TwinRun, simulate
 from serpar.sim.recording import PhaseSegment, Recording, RecordingMeta
-from serpar.sim.rigid_arm import FLANGE_BODY, FLANGE_Z, rigid_arm_spec
+from serpar.sim.rigid_arm import FLANGE_BODY, FLANGE_Z, ArmDynamics, rigid_arm_spec
 
+OUT_OF_LIBRARY: tuple[str, ...] = ("stribeck_friction", "torque_ripple", "encoder_scale")
+"""Effects the diagnosis has no candidate for: they must come out as unexplained residual."""
 EFFECTS: tuple[str, ...] = ("joint_friction", "payload", "link_inertia", "torque_sensor",
-                            "latency", "sensor_timing", "encoder_offset")
+                            "latency", "sensor_timing", "encoder_offset", *OUT_OF_LIBRARY)
 MAGNITUDE_RANGE: dict[str, tuple[float, float]] = {
     "joint_friction": (0.2, 1.0),
     "payload": (0.2, 1.5),
@@ -45,9 +56,24 @@ MAGNITUDE_RANGE: dict[str, tuple[float, float]] = {
     "latency": (0.001, 0.004),
     "sensor_timing": (0.0005, 0.002),
     "encoder_offset": (0.001, 0.004),
+    "stribeck_friction": (0.5, 1.0),
+    "torque_ripple": (0.15, 0.6),
+    "encoder_scale": (0.005, 0.015),
 }
 PANDA_VISCOUS: tuple[float, ...] = (0.2, 0.2, 0.2, 0.2, 0.1, 0.1, 0.1)
 """Viscous joint friction of a Panda-class drive at scale 1 [N m s/rad] (order of Gaz et al.)."""
+STRIBECK_RATIO = (1.5, 2.5)
+"""Static over Coulomb friction Fs / Fc of each drive (harmonic drives: ~1.5-2.5)."""
+STRIBECK_SPEED = (0.02, 0.08)
+"""Stribeck velocity vs of each drive [rad/s]: below it the friction rises to Fs."""
+RIPPLE_PERIOD_DEG = (10.0, 45.0)
+"""Period of the torque ripple in the joint angle [deg] (8-36 per revolution)."""
+LOADED_JOINTS = (1, 2, 3, 4, 5)
+"""Joints 2-6 (0-based): the ones whose angle moves a gravity load or whose drive ripples."""
+SCALE_JOINTS = (1, 2, 3)
+"""Joints 2-4 (0-based), one of which has encoder_scale's largest error: their gravity load
+shows a scale error (20 s, s = 0.005: 2.3-8 x the noise before any fit); on joints 5-6 even
+s = 0.01 reads 1.35 x (joint 5) or is taken up by an offset to 1.25 x (joint 6)."""
 INERTIA_LINKS = (3, 4, 5)
 """Links a link_inertia twin may get wrong: the heavy ones (links 1-2 hardly load the joints)."""
 DURATION = 20.0
@@ -118,6 +144,80 @@ def _reality(effect: str, mag: float, rng: np.random.Generator) -> tuple[Reality
     return Reality(), {}
 
 
+def _stribeck(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator
+              ) -> tuple[Reality, dict[str, object], dict[str, object]]:
+    # Coulomb + viscous as joint_friction (MuJoCo's); the Stribeck excess acts in the drive
+    params: dict[str, object] = dict(_friction(spec, mag, rng))
+    fc = np.array([params[f"Fc{j + 1}"] for j in range(N_JOINTS)], float)
+    ratio = rng.uniform(*STRIBECK_RATIO, N_JOINTS)
+    vs = rng.uniform(*STRIBECK_SPEED, N_JOINTS)
+    excess = (ratio - 1.0) * fc
+    params.update({f"Fs{j + 1}": float(ratio[j] * fc[j]) for j in range(N_JOINTS)})
+    params.update({f"vs{j + 1}": float(vs[j]) for j in range(N_JOINTS)})
+    order = np.argsort(-excess)
+    j = int(order[0]) + 1
+    words = (f"every drive loses extra torque at low speed (|dq| below its vs, 0.02-0.08 rad/s), "
+             f"joint {j} most ({excess[j - 1]:.2f} N m more below {vs[j - 1]:.3f} rad/s): "
+             "friction falling from Fs to Fc with speed, beyond Coulomb + viscous; in the "
+             "command (tau_J_d - tau_J), not in the link-side sensor")
+    signature: dict[str, object] = {"channels": [f"tau_J_d{i + 1}" for i in order],
+                                    "variables": [f"dq{j}"], "words": words}
+    return Reality(stribeck_excess=excess, stribeck_speed=vs), params, signature
+
+
+def _ripple(mag: float, rng: np.random.Generator
+            ) -> tuple[Reality, dict[str, object], dict[str, object]]:
+    joint = int(rng.choice(LOADED_JOINTS))
+    period_deg = float(rng.uniform(*RIPPLE_PERIOD_DEG))
+    phase = float(rng.uniform(0.0, 2 * np.pi))
+    j = joint + 1
+    params: dict[str, object] = {"joint": j, "amplitude": mag, "period_deg": period_deg,
+                                 "period_rad": float(np.radians(period_deg)), "phase": phase}
+    words = (f"joint {j}'s drive adds {mag:.2f} N m sin(2 pi q{j} / {period_deg:.1f} deg + "
+             f"phase): the command tau_J_d{j} is off by a ripple periodic in q{j}; the "
+             "link-side sensor and the other joints are not")
+    signature: dict[str, object] = {"channels": [f"tau_J_d{j}"], "variables": [f"q{j}"],
+                                    "period_deg": period_deg, "words": words}
+    return Reality(ripple=((joint, mag, np.radians(period_deg), phase),)), params, signature
+
+
+def _encoder_scale(mag: float, rng: np.random.Generator) -> tuple[Reality, dict[str, object]]:
+    first = int(rng.choice(SCALE_JOINTS))
+    scale = np.zeros(N_JOINTS)
+    scale[first] = mag * rng.choice([-1.0, 1.0])
+    if rng.random() < 0.5:  # a second, smaller one anywhere in 2-6
+        second = int(rng.choice([j for j in LOADED_JOINTS if j != first]))
+        scale[second] = mag * rng.uniform(-1.0, 1.0)
+    return Reality(encoder_scale=scale), {f"scale{j + 1}": float(scale[j]) for j in LOADED_JOINTS}
+
+
+def _scale_signature(reality: Reality, run: TwinRun) -> dict[str, object]:
+    """Where the scale error shows: the channel whose link torque it moves most, the nominal
+    model at the true motion against the model at the read one (std about the mean: the
+    diagnosis tares each sensor's constant). Gravity carries most of it, inertia the rest."""
+    dyn = ArmDynamics()
+    q = run.q_true
+    dq = np.gradient(q, axis=0) * RATE  # the true motion is noise-free: plain differences
+    ddq = np.gradient(dq, axis=0) * RATE
+    rows = slice(2, -2, 20)  # 50 Hz rows are plenty for the slow excitation
+    gain = 1.0 + reality.encoder_scale
+    true = dyn.link_torque(q[rows], dq[rows], ddq[rows])
+    read = dyn.link_torque(reality.encoder_reading(q[rows]), gain * dq[rows], gain * ddq[rows])
+    shift = np.std(true - read, axis=0)
+    c = int(np.argmax(shift)) + 1
+    # every joint within half of the largest: an angle's error moves several joints' gravity
+    seen = [int(i) + 1 for i in np.argsort(-shift) if shift[i] >= 0.5 * shift[c - 1]]
+    scaled = [int(i) for i in np.argsort(-np.abs(reality.encoder_scale)) if reality.encoder_scale[i]]
+    j = scaled[0] + 1
+    return {"channels": [name for i in seen for name in (f"tau_J{i}", f"tau_J_d{i}")],
+            "variables": [f"q{i + 1}" for i in scaled],
+            "torque_shift_std": [float(v) for v in shift],
+            "words": f"encoder {j} reads q{j} (1 {reality.encoder_scale[j - 1]:+.4f}) about its "
+                     f"zero: the model's torque (gravity mostly) is off by an amount growing with "
+                     f"q{j}, most on joint {c} ({shift[c - 1]:.2f} N m std), in both tau_J{c} "
+                     f"and tau_J_d{c}"}
+
+
 def make_twin(effect: str | None, magnitude: float | None, seed: int,
               duration: float = DURATION, noise: SensorNoise | None = None
               ) -> tuple[Recording, dict[str, object]]:
@@ -133,10 +233,17 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int,
     if magnitude is not None and not (np.isfinite(magnitude) and magnitude > 0):
         raise ConfigError(f"magnitude {magnitude} must be a positive number")
     spec = rigid_arm_spec()
-    params: dict[str, float] = {}
+    params: Mapping[str, object] = {}
     reality = Reality()
+    signature: dict[str, object] | None = None
     if effect == "joint_friction":
         params = _friction(spec, magnitude, effect_rng)
+    elif effect == "stribeck_friction":
+        reality, params, signature = _stribeck(spec, magnitude, effect_rng)
+    elif effect == "torque_ripple":
+        reality, params, signature = _ripple(magnitude, effect_rng)
+    elif effect == "encoder_scale":
+        reality, params = _encoder_scale(magnitude, effect_rng)
     elif effect == "payload":
         params = _payload(spec, magnitude, effect_rng)
     elif effect == "link_inertia":
@@ -145,9 +252,13 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int,
         reality, params = _reality(effect, magnitude, effect_rng)
     run = simulate(_plant(spec), reality, noise, duration, RATE,
                    int(sim_seed.integers(2**31)))
-    answer = {"effect": effect, "magnitude": magnitude, "params": params,
-              "torque_offset": [float(b) for b in run.torque_offset],
-              "saturated_samples": run.saturated}
+    if effect == "encoder_scale":
+        signature = _scale_signature(reality, run)
+    answer: dict[str, object] = {"effect": effect, "magnitude": magnitude, "params": params,
+                                 "torque_offset": [float(b) for b in run.torque_offset],
+                                 "saturated_samples": run.saturated}
+    if signature is not None:
+        answer["signature"] = signature
     return _recording(run, noise), answer
 
 

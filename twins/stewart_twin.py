@@ -25,12 +25,27 @@ diagnosis holds out the last 40 % of the holds in time):
   reads the command. Geometry's leg-length errors can absorb it; the diagnosis must prefer
   the 6 offsets to the 42 geometric parameters on held-out data.
 
+Outside the diagnosis library (``OUT_OF_LIBRARY``: no candidate models them, so a diagnosis
+should leave them as unexplained residual; each answer carries a ``signature``: the channels,
+the variable the residual follows and a sentence):
+
+- ``leg_thermal_nonuniform``: two legs (drawn) warm towards steady temperatures, leg i by
+  dT_i(t) = dT_i,max (1 - exp(-t / tau_i)), tau_i drawn 2-6 min (a motor heating its own
+  cylinder), dT_max ``magnitude`` K for one and 0.5-1 x that for the other; the other four
+  stay cold. Unlike ``leg_thermal_drift``, neither uniform nor linear in time.
+- ``leg_encoder_scale``: one leg's encoder (drawn) reads its stroke x (1 + s), |s| =
+  ``magnitude``, random sign (a lead error of the screw or a mis-set encoder resolution): the
+  servo holds the reading at the command, so that leg stands short or long in proportion to
+  its stroke, which a constant offset cannot follow.
+
 ``magnitude`` None takes DEFAULT_MAGNITUDE; the blind bench draws from MAGNITUDE_RANGE. A hold
 still moving after MAX_SETTLE_S of simulated settling is counted in the answer
 (``unsettled_holds``), not hidden.
 """
 
 from __future__ import annotations
+
+from typing import cast
 
 import numpy as np
 import pyarrow as pa
@@ -48,18 +63,34 @@ from serpar.sim.stewart import StewartConfig
 
 Vec = NDArray[np.float64]
 
+OUT_OF_LIBRARY: tuple[str, ...] = ("leg_thermal_nonuniform", "leg_encoder_scale")
+"""Effects the diagnosis has no candidate for: they must come out as unexplained residual."""
+PARTLY_IN_LIBRARY: dict[str, tuple[str, ...]] = {
+    "leg_thermal_nonuniform": ("leg_thermal_drift", "leg_encoder_offset"),
+    "leg_encoder_scale": ("leg_encoder_offset",),
+}
+"""Library effects that express part of the same physics (the blind bench does not count
+them as wrong findings): thermal growth, though uniform; the constant part of a leg's error
+as its encoder offset. Joint-position errors are not: the joints are where they were built."""
+"""Library effects that express part of an out-of-library effect's physics (not a wrong
+finding when established): a warmed leg is a constant length error once warm and a drift
+while warming; a scale error's mean over the strokes is a constant length error."""
 EFFECTS: tuple[str, ...] = ("stewart_geometry", "leg_thermal_drift", "leg_compliance",
-                            "leg_encoder_offset")
+                            "leg_encoder_offset", *OUT_OF_LIBRARY)
 DEFAULT_MAGNITUDE: dict[str, float] = {"stewart_geometry": 1.0, "leg_thermal_drift": 5.0,
-                                       "leg_compliance": 5e-8, "leg_encoder_offset": 5e-5}
+                                       "leg_compliance": 5e-8, "leg_encoder_offset": 5e-5,
+                                       "leg_thermal_nonuniform": 40.0, "leg_encoder_scale": 2e-3}
 MAGNITUDE_RANGE: dict[str, tuple[float, float]] = {
     "stewart_geometry": (0.3, 1.5),     # x Table 5 RMS
     "leg_thermal_drift": (3.0, 10.0),   # K of warming over the campaign
     "leg_compliance": (2e-8, 1e-7),     # m/N (50 to 10 N/um)
     "leg_encoder_offset": (2e-5, 2e-4),  # m, the largest of the six
+    "leg_thermal_nonuniform": (20.0, 60.0),  # K, the warmer leg's steady warming
+    "leg_encoder_scale": (1e-3, 3e-3),  # |relative scale error| of the one leg (below 1e-3 the
+    # geometry and compliance candidates absorb it to ~2x the noise)
 }
 UNITS = {"stewart_geometry": "x Table 5", "leg_thermal_drift": "K", "leg_compliance": "m/N",
-         "leg_encoder_offset": "m"}
+         "leg_encoder_offset": "m", "leg_thermal_nonuniform": "K", "leg_encoder_scale": "1"}
 N_POSES = 150
 HOLDOUT_SHARE = 0.4
 """Share of the poses (the last in time) the diagnosis holds out; the twin's narrow poses
@@ -78,6 +109,8 @@ HOLD_S, RATE_HZ = 1.0, 100.0
 SETTLE_BEFORE_HOLD_S = 4.0
 """Each pose period: move and settle, then the 1 s hold that is recorded."""
 STEEL_PER_K = 11.5e-6
+THERMAL_TAU_S = (120.0, 360.0)
+"""Range of the legs' thermal time constants: a few minutes for a motor-heated cylinder."""
 PAYLOAD_KG = 3.0
 PAYLOAD_COM_M = (0.03, -0.02, 0.05)
 LEG_SIGMA_M = 5e-8
@@ -135,7 +168,38 @@ def _reality(effect: str | None, mag: float, rng: np.random.Generator, duration:
         o = rng.uniform(-1.0, 1.0, 6)
         o *= mag / np.max(np.abs(o))
         return Reality(encoder_offset_m=o, **base), {"encoder_offset_m": o.tolist()}
+    if effect == "leg_thermal_nonuniform":
+        legs = np.sort(rng.choice(6, 2, replace=False))
+        dt_max = np.zeros(6)
+        dt_max[legs] = rng.permutation([mag, mag * rng.uniform(0.5, 1.0)])
+        tau = rng.uniform(*THERMAL_TAU_S, 6)  # every leg has one; only two warm
+        reality = Reality(growth_saturation=STEEL_PER_K * dt_max, growth_tau_s=tau, **base)
+        return reality, {"legs": (legs + 1).tolist(), "dT_max_k": dt_max[legs].tolist(),
+                         "tau_s": tau[legs].tolist(), "expansion_per_k": STEEL_PER_K,
+                         "growth_saturation": reality.growth_saturation.tolist()}
+    if effect == "leg_encoder_scale":
+        leg = int(rng.integers(6))
+        scale = np.zeros(6)
+        scale[leg] = mag * rng.choice([-1.0, 1.0])
+        return Reality(encoder_scale=scale, **base), {"leg": leg + 1, "scale": float(scale[leg]),
+                                                      "encoder_scale": scale.tolist()}
     return Reality(**base), {}
+
+
+def _signature(effect: str | None, params: dict[str, object]) -> dict[str, object] | None:
+    """Where an out-of-library effect shows: channels, the variable it follows, in words."""
+    if effect == "leg_thermal_nonuniform":
+        legs = cast(list[int], params["legs"])
+        return {"channels": [f"leg {i}" for i in legs], "variables": ["time"],
+                "words": f"legs {legs[0]} and {legs[1]} grow by themselves, quickly at first and "
+                         "then levelling off over the campaign (saturating warm-up); the other "
+                         "legs do not"}
+    if effect == "leg_encoder_scale":
+        leg = cast(int, params["leg"])
+        return {"channels": [f"leg {leg}"], "variables": [f"stroke {leg}"],
+                "words": f"leg {leg} is off by an amount proportional to its own stroke "
+                         "(encoder scale error), zero at the encoder zero"}
+    return None
 
 
 def make_twin(effect: str | None, magnitude: float | None, seed: int, n_poses: int = N_POSES
@@ -157,8 +221,8 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int, n_poses: i
     n_hold = round(HOLD_S * RATE_HZ)
     true_pos, true_rot, slides, settle = [], [], [], []
     for k in range(n_poses):
-        # the servo holds the encoder (true stroke + offset) at the command
-        p, r, s, el = plant.settle(cmd[k] - reality.encoder_offset_m,
+        # the servo holds the encoder (true stroke x (1 + scale) + offset) at the command
+        p, r, s, el = plant.settle(reality.stroke_for_reading(cmd[k]),
                                    float(start[k] + 0.5 * HOLD_S), (pos[k], rot[k]))
         true_pos.append(p), true_rot.append(r), slides.append(s), settle.append(el)
     rec = _recording(np.array(true_pos), np.array(true_rot), np.array(slides), cmd, start,
@@ -167,6 +231,9 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int, n_poses: i
               "seed": seed, "params": params, "n_poses": n_poses,
               "settle_s_max": float(np.max(settle)), "settle_s_mean": float(np.mean(settle)),
               "unsettled_holds": int(np.sum(np.asarray(settle) >= MAX_SETTLE_S - 1e-9))}
+    signature = _signature(effect, params)
+    if signature is not None:
+        answer["signature"] = signature
     return rec, answer
 
 
@@ -201,7 +268,7 @@ def _recording(pos: Vec, rot: Vec, slides: Vec, cmd: Vec, start: Vec, n_hold: in
     sigma_a = np.radians(MOCAP.angle_deg)
     mp = pos[idx] + MOCAP.position_m * rng.standard_normal((len(t), 3))
     quat = mocap_quaternion(Rotation.from_matrix(rot[idx]), sigma_a, rng)
-    legs = cfg.l_min + slides[idx] + reality.encoder_offset_m \
+    legs = cfg.l_min + slides[idx] * (1.0 + reality.encoder_scale) + reality.encoder_offset_m \
         + LEG_SIGMA_M * rng.standard_normal((len(t), 6))
     cols, sigma = stewart_channels(t, cfg.l_min + cmd[idx], legs, mp, quat, sigma_a)
     model = {"stewart": {"l_min": cfg.l_min, "stroke": cfg.stroke, "home_z": cfg.home_z,

@@ -8,7 +8,10 @@ Timing, as the diagnosis assumes it (diagnosis/arm_dynamics_signals.py):
 - ``tau_J`` is the link-side torque sensor's mean over the period that ends at t_k (a strain
   gauge behind an integrating ADC; trapezoidal over the 0.1 ms physics substeps);
 - ``tau_J_d`` is the command computed from the row's measurements and held over the period;
-  the drive delivers it, ``delay`` later, with a white torque ripple per period.
+  the drive delivers it, ``delay`` later, with a white torque ripple per period, plus what
+  the reality's drive adds between motor and link-side sensor (Stribeck friction, a
+  position-periodic ripple: ``qfrc_applied`` at every substep, which the sensor reads only
+  through the motion it causes, like MuJoCo's joint friction).
 
 MuJoCo's semi-implicit Euler step is a leapfrog: the force of substep n acts as an impulse
 centred on t_n, so a torque switched at the start of substep n would act half a substep
@@ -19,6 +22,7 @@ of an effect-free twin finds a latency of -0.05 ms, 3 sigma on 20 s).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import mujoco
@@ -45,6 +49,8 @@ latency. When joint 2 nears zero, joints 1 and 3 turn about nearly one axis and 
 difference mode has only the rotors' inertia (~0.1 kg m^2): the example's 50 N m s/rad then
 puts its crossover near 500 rad/s, and a 3.8 ms latency made it ring at 30-60 Hz and
 saturate at 87 N m."""
+STRIBECK_SMOOTHING = 1e-3
+"""[rad/s] Width of the smoothed sign of the Stribeck friction (tanh(v / width))."""
 
 
 @dataclass(frozen=True)
@@ -81,22 +87,91 @@ class Reality:
     """Extra offset of each torque sensor [N m], on top of the start-up draw."""
     encoder_offset: Vec = field(default_factory=lambda: np.zeros(N_JOINTS))
     """Measured minus true joint angle [rad]."""
+    encoder_scale: Vec = field(default_factory=lambda: np.zeros(N_JOINTS))
+    """Relative scale error of each encoder about its zero: it reads q (1 + s) + offset."""
     delay: float = 0.0
     """Actuation latency: a command reaches the joint this much later [s]."""
     sensor_lag: float = 0.0
     """The torque sensors' readings belong to this much earlier than the encoders' [s]
     (a whole number of physics substeps)."""
+    stribeck_excess: Vec = field(default_factory=lambda: np.zeros(N_JOINTS))
+    """Static minus Coulomb friction of each drive, Fs - Fc [N m]: at joint speed v the drive
+    loses (Fs - Fc) exp(-(v / vs)^2) more, against the motion (the Coulomb and viscous parts
+    are the plant's MuJoCo frictionloss and damping)."""
+    stribeck_speed: Vec = field(default_factory=lambda: np.full(N_JOINTS, 0.05))
+    """Stribeck velocity vs of each drive [rad/s]."""
+    ripple: tuple[tuple[int, float, float, float], ...] = ()
+    """Position-periodic transmission ripple, one (joint index 0-6, amplitude [N m], period
+    [rad], phase [rad]) per rippling joint: the drive adds A sin(2 pi q / period + phase)."""
 
     def __post_init__(self) -> None:
-        for name in ("torque_gain", "torque_bias", "encoder_offset"):
+        for name, lo, hi in (("torque_gain", -np.inf, np.inf), ("torque_bias", -np.inf, np.inf),
+                             ("encoder_offset", -np.inf, np.inf), ("encoder_scale", -0.05, 0.05),
+                             ("stribeck_excess", 0.0, 5.0), ("stribeck_speed", 1e-3, 1.0)):
             v = np.asarray(getattr(self, name), float)
             if v.shape != (N_JOINTS,) or not np.all(np.isfinite(v)):
                 raise ConfigError(f"Reality.{name} needs {N_JOINTS} finite values")
+            if np.any(v < lo) or np.any(v > hi):
+                raise ConfigError(f"Reality.{name}={v.tolist()} outside {lo:g}..{hi:g}")
             object.__setattr__(self, name, v)
         if not 0.0 <= self.delay <= 0.02:
             raise ConfigError(f"Reality.delay={self.delay} s outside 0..0.02 s")
         if not 0.0 <= self.sensor_lag <= 0.005:
             raise ConfigError(f"Reality.sensor_lag={self.sensor_lag} s outside 0..0.005 s")
+        object.__setattr__(self, "ripple", tuple(_ripple_entry(r) for r in self.ripple))
+        joints = [r[0] for r in self.ripple]
+        if len(set(joints)) != len(joints):
+            raise ConfigError(f"Reality.ripple names a joint twice: {joints}")
+
+    def encoder_reading(self, q: Vec) -> Vec:
+        """What the encoders read at the true angles q, before quantisation [rad]."""
+        return q * (1.0 + self.encoder_scale) + self.encoder_offset
+
+    def drive_torque(self) -> Callable[[Vec, Vec], Vec] | None:
+        """The drive's torque beyond its command at true (q, dq) [N m], or None without one
+        (the simulation then skips it): Stribeck friction and position ripple."""
+        stribeck = bool(np.any(self.stribeck_excess > 0))
+        if not stribeck and not self.ripple:
+            return None
+        neg_excess, inv_speed = -self.stribeck_excess, 1.0 / self.stribeck_speed
+        inv_width = 1.0 / STRIBECK_SMOOTHING
+        joint = np.array([r[0] for r in self.ripple], int)
+        amp, period, phase = (np.array([r[i] for r in self.ripple], float) for i in (1, 2, 3))
+        wavenumber = 2 * np.pi / period if len(period) else period
+
+        def torque(q: Vec, dq: Vec) -> Vec:
+            # called at every 0.1 ms substep: a few whole-vector ufuncs (~2.5 us), no loops.
+            # tanh instead of sign: continuous through v = 0, where MuJoCo's frictionloss
+            # constraint holds the joint; 1 mm/s keeps h * slope / inertia < 1 at the twin's
+            # Fs - Fc (<= 0.8 N m on wrist joints of >= 0.1 kg m^2): explicit and still stable
+            if stribeck:
+                x = dq * inv_speed
+                out = neg_excess * np.exp(-x * x) * np.tanh(dq * inv_width)
+            else:
+                out = np.zeros(N_JOINTS)
+            if len(joint):
+                out[joint] += amp * np.sin(wavenumber * q[joint] + phase)
+            return out
+
+        return torque
+
+
+def _ripple_entry(r: tuple[int, float, float, float]) -> tuple[int, float, float, float]:
+    try:
+        values = np.asarray(r, float)
+    except (TypeError, ValueError):
+        values = np.empty(0)
+    if values.shape != (4,) or not np.all(np.isfinite(values)):
+        raise ConfigError(f"Reality.ripple entry {r} needs 4 finite values "
+                          "(joint index, amplitude, period, phase)")
+    j, amp, period, phase = r
+    if int(j) != j or not 0 <= j < N_JOINTS:
+        raise ConfigError(f"Reality.ripple joint index {j} outside 0..{N_JOINTS - 1}")
+    if not 0.0 <= amp <= 5.0:
+        raise ConfigError(f"Reality.ripple amplitude {amp} N m outside 0..5 N m")
+    if not 0.01 <= period <= 2 * np.pi:
+        raise ConfigError(f"Reality.ripple period {period} rad outside 0.01..2 pi rad")
+    return int(j), float(amp), float(period), float(phase)
 
 
 @dataclass(frozen=True)
@@ -110,6 +185,9 @@ class TwinRun:
     """Samples at which some command hit the torque limit."""
     torque_offset: Vec
     """The torque sensors' total offset (start-up draw + the reality's) [N m]."""
+    q_true: Vec
+    """The true joint angles at the rows' times (what the encoders read, before their errors
+    and quantisation) [rad]: for the answer and the tests, never for the recording."""
 
 
 def excitation(duration: float, rate: float, rng: np.random.Generator) -> tuple[Vec, Vec, Vec]:
@@ -148,18 +226,25 @@ def simulate(model: mujoco.MjModel, reality: Reality, noise: SensorNoise, durati
     model.opt.timestep = physics.timestep
     data = mujoco.MjData(model)
     idx = ArmIndex.from_model(model)
-    data.qpos[idx.qpos], data.qvel[idx.dof] = q_d[0], dq_d[0]
+    # start where the encoders read the desired pose through their scale (1 for s = 0)
+    data.qpos[idx.qpos] = q_d[0] / (1.0 + reality.encoder_scale)
+    data.qvel[idx.dof] = dq_d[0] / (1.0 + reality.encoder_scale)
     bias = rng.normal(0.0, noise.torque_bias_std, N_JOINTS) + reality.torque_bias
-    ripple = rng.normal(0.0, noise.actuation_std, (n, N_JOINTS))
+    drive_noise = rng.normal(0.0, noise.actuation_std, (n, N_JOINTS))
+    drive_torque = reality.drive_torque()  # None: no extra drive physics, no per-substep cost
     kp, kd = np.asarray(KP), np.asarray(KD)
     delay_steps = round(reality.delay / physics.timestep)
 
-    out_q, out_dq, out_tau, out_cmd = (np.empty((n, N_JOINTS)) for _ in range(4))
+    out_q, out_dq, out_tau, out_cmd, out_true = (np.empty((n, N_JOINTS)) for _ in range(5))
     applied = np.empty((n, N_JOINTS))
     saturated = 0
-    if not np.array_equal(idx.torque_adr, 3 * np.arange(N_JOINTS) + 2) or not np.array_equal(
-            idx.actuators, np.arange(N_JOINTS)):
-        raise ConfigError("the twin expects the arm's 7 motors and 7 torque sensors in order")
+    first = np.arange(N_JOINTS)
+    if not (np.array_equal(idx.torque_adr, 3 * first + 2) and np.array_equal(idx.actuators, first)
+            and np.array_equal(idx.qpos, first) and np.array_equal(idx.dof, first)):
+        raise ConfigError("the twin expects the arm's 7 joints, motors and torque sensors first, "
+                          "in order")
+    # views: the drive's extra torque is read and written at every substep without copies
+    q_true, dq_true, extra = (x[:N_JOINTS] for x in (data.qpos, data.qvel, data.qfrc_applied))
     torque = data.sensordata[2::3]  # a view: the joint-axis component of each torque sensor
     ctrl = data.ctrl
     weights = np.ones(sub + 1)
@@ -172,18 +257,23 @@ def simulate(model: mujoco.MjModel, reality: Reality, noise: SensorNoise, durati
     history = np.zeros((n * sub + 1, N_JOINTS))  # the sensors at every substep's start
     mujoco.mj_forward(model, data)
     for k in range(n):
-        q_m = quantise(data.qpos[idx.qpos] + reality.encoder_offset, noise.encoder_counts_per_rev)
-        dq_m = data.qvel[idx.dof] + rng.normal(0.0, noise.velocity_std, N_JOINTS)
+        out_true[k] = data.qpos[idx.qpos]
+        q_m = quantise(reality.encoder_reading(out_true[k]), noise.encoder_counts_per_rev)
+        # the velocity is the encoder's, differentiated: it carries the same scale error
+        dq_m = (data.qvel[idx.dof] * (1.0 + reality.encoder_scale)
+                + rng.normal(0.0, noise.velocity_std, N_JOINTS))
         cmd = feedforward[k] + kp * (q_d[k] - q_m) + kd * (dq_d[k] - dq_m)
         cmd, sat = saturate_torque(cmd)
         saturated += bool(np.any(sat))
         out_q[k], out_dq[k], out_cmd[k] = q_m, dq_m, cmd
-        applied[k] = cmd + ripple[k]
+        applied[k] = cmd + drive_noise[k]
         for s in range(sub):
             g = k * sub + s - delay_steps  # the substep whose command now reaches the joint
             new = applied[max(g // sub, 0)]
             old = applied[max((g - 1) // sub, 0)]
             ctrl[:] = new if g % sub else 0.5 * (old + new)  # a jump: centred on t_n
+            if drive_torque is not None:  # acts in the drive, before the link-side sensor
+                extra[:] = drive_torque(q_true, dq_true)
             mujoco.mj_step(model, data)  # sensors at the substep's start state and torque
             history[k * sub + s] = torque
             if s == 0:
@@ -195,4 +285,4 @@ def simulate(model: mujoco.MjModel, reality: Reality, noise: SensorNoise, durati
                               + rng.normal(0.0, noise.torque_std, N_JOINTS))
         if not np.all(np.isfinite(data.qpos)):
             raise ConfigError(f"the twin's simulation diverged at t = {k * h:.3f} s")
-    return TwinRun(np.arange(n) * h, out_q, out_dq, out_tau, out_cmd, saturated, bias)
+    return TwinRun(np.arange(n) * h, out_q, out_dq, out_tau, out_cmd, saturated, bias, out_true)

@@ -9,10 +9,12 @@ What MuJoCo expresses here, per hidden effect:
   actuated slide (a screw, nut and bearing stack is a spring the encoder cannot see); MuJoCo
   finds the deflection under the platform's and payload's weight;
 - thermal growth: the rod body sits further out along its leg (``body_pos``) by the growth at
-  the time of the hold;
-- encoder zero offset: the servo closes its loop on the encoder, which reads the true stroke
-  plus the offset, so the slide settles at the command minus the offset while the recorded
-  leg channel reads the command.
+  the time of the hold: uniform and linear in time (``growth_per_s``) and/or per leg and
+  saturating (``growth_saturation`` with ``growth_tau_s``: a leg warming towards its steady
+  temperature with its own time constant);
+- encoder zero offset and scale error: the servo closes its loop on the encoder, which reads
+  the true stroke x (1 + scale) plus the offset, so the slide settles where that reading
+  equals the command (``Reality.stroke_for_reading``) while the recorded leg channel reads it.
 
 Why each hold starts at a quasi-static estimate rather than being driven there: a stepped
 command takes the servo's integral ~0.6 s (6000 substeps) to settle to 0.1 um. Started at the
@@ -50,6 +52,12 @@ COMPLIANCE_DAMPING_RATIO = 1.0
 COMPLIANCE_ARMATURE_KG = 1.0
 """Reflected inertia of the passive spring's moving parts; keeps its mode (with the 0.1 kg
 rod) below 1/(2 dt) for the stiffest legs the twins draw."""
+MAX_ENCODER_SCALE = 0.05
+"""Largest |encoder scale error| a Reality takes: 5 % is a wrong encoder setting, not an error."""
+MAX_GROWTH = 0.01
+"""Largest |relative leg growth| at saturation: 1 % is ~870 K of steel."""
+MAX_GROWTH_PER_S = 1e-5
+"""Largest |uniform growth rate|: 1e-5 /s is ~870 K of steel in 15 min."""
 
 
 @dataclass(frozen=True)
@@ -61,9 +69,18 @@ class Reality:
     compliance_m_per_n: Vec | None = None
     """(6,) axial compliance of the passive spring in each leg [m/N]; None: rigid legs."""
     encoder_offset_m: Vec = field(default_factory=lambda: np.zeros(N_LEGS))
-    """(6,) encoder reading minus true stroke [m]."""
+    """(6,) encoder reading minus true stroke x (1 + scale) [m]."""
+    encoder_scale: Vec = field(default_factory=lambda: np.zeros(N_LEGS))
+    """(6,) relative scale error of each encoder: it reads the true stroke (from its zero, the
+    slide at l_min) x (1 + scale)."""
     growth_per_s: float = 0.0
     """Relative leg length growth per second (thermal expansion coefficient x warming rate)."""
+    growth_saturation: Vec | None = None
+    """(6,) relative growth of each leg once warm (expansion coefficient x its steady warming);
+    with ``growth_tau_s``, leg i grows by growth_saturation_i (1 - exp(-t / tau_i)) on top of
+    ``growth_per_s`` t. None: no saturating growth."""
+    growth_tau_s: Vec | None = None
+    """(6,) thermal time constant of each leg [s] (used with ``growth_saturation``)."""
     payload_kg: float = 0.0
     payload_com_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """Payload centre of mass in the platform frame [m]."""
@@ -75,8 +92,35 @@ class Reality:
                 raise ConfigError(f"compliance_m_per_n must be {N_LEGS} positive values [m/N]")
         if np.asarray(self.encoder_offset_m).shape != (N_LEGS,):
             raise ConfigError(f"encoder_offset_m must be {N_LEGS} values [m]")
+        scale = np.asarray(self.encoder_scale, float)
+        if scale.shape != (N_LEGS,) or not np.all(np.abs(scale) <= MAX_ENCODER_SCALE):
+            raise ConfigError(f"encoder_scale must be {N_LEGS} values in "
+                              f"[-{MAX_ENCODER_SCALE:g}, {MAX_ENCODER_SCALE:g}]")
+        if not (np.isfinite(self.growth_per_s) and abs(self.growth_per_s) <= MAX_GROWTH_PER_S):
+            raise ConfigError(f"growth_per_s {self.growth_per_s}: valid |x| <= {MAX_GROWTH_PER_S:g} /s")
+        if (self.growth_saturation is None) != (self.growth_tau_s is None):
+            raise ConfigError("growth_saturation and growth_tau_s go together (both or neither)")
+        if self.growth_saturation is not None:
+            sat = np.asarray(self.growth_saturation, float)
+            tau = np.asarray(self.growth_tau_s, float)
+            if sat.shape != (N_LEGS,) or not np.all(np.abs(sat) <= MAX_GROWTH):
+                raise ConfigError(f"growth_saturation must be {N_LEGS} values in "
+                                  f"[-{MAX_GROWTH:g}, {MAX_GROWTH:g}] (relative growth)")
+            if tau.shape != (N_LEGS,) or not np.all((tau > 0) & np.isfinite(tau)):
+                raise ConfigError(f"growth_tau_s must be {N_LEGS} finite values > 0 [s]")
         if self.payload_kg < 0:
             raise ConfigError(f"payload_kg {self.payload_kg} must be >= 0")
+
+    def relative_growth(self, t: float) -> float | Vec:
+        """Thermal growth of each leg relative to its length at time ``t`` [s]."""
+        linear = self.growth_per_s * t  # the uniform drift alone stays a scalar (bit-identical)
+        if self.growth_saturation is None:
+            return linear
+        return linear + np.asarray(self.growth_saturation) * -np.expm1(-t / np.asarray(self.growth_tau_s))
+
+    def stroke_for_reading(self, reading: Vec) -> Vec:
+        """True stroke [m] at which the encoders read ``reading`` (where the servo holds them)."""
+        return (reading - self.encoder_offset_m) / (1.0 + np.asarray(self.encoder_scale))
 
 
 def platform_spec(reality: Reality, physics: PhysicsConfig) -> tuple[mujoco.MjSpec, StewartConfig]:
@@ -149,7 +193,7 @@ class PlatformPlant:
         forces, springs deflected by them); else from the rigid kinematics and the previous
         hold's integral (slower; the twin's tests check both reach one equilibrium)."""
         m, d = self.model, self.data
-        growth = self.reality.growth_per_s * t * (self.L0 + strokes)
+        growth = self.reality.relative_growth(t) * (self.L0 + strokes)
         m.body_pos[self.rod_body, 2] = self.rod_pos0[:, 2] + growth
         length = self.L0 + growth + strokes
         pos, rot, _ = forward_kinematics(self._geom, length - self._geom.l_min, guess[0], guess[1])

@@ -1,0 +1,310 @@
+"""Stage "outside the library": characterise a structured residual that no candidate explains,
+as a sparse empirical term over a library of basis functions, and name it as a hypothesis.
+
+A family offers ``empirical_library() -> list[BasisGroup]``: small groups of basis columns,
+each tied to one residual channel (a joint's torque channel, a leg), one variable (a joint
+angle, its velocity, time, a leg's stroke) and one shape (periodic in the variable, a step at
+its reversal, a fall from standstill, a proportion, a drift). Each column is the change of the
+whitened residual per unit coefficient, so a fit is weighted least squares in physical units.
+
+Selection is forward and sparse, with the price every candidate effect pays
+(:func:`serpar.diagnosis.fit.earns`): a group of k columns enters only when its chi-square drop
+exceeds k ln(n) on the training rows *and* on the held-out rows. A selected group is kept
+only when the same (channel, variable, shape) is selected again on ``MIN_FREQUENCY`` of the
+resampled folds. Whatever is kept is a labelled empirical term, never a named physical effect:
+its words say what it looks like and why that is a hypothesis.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from serpar.diagnosis.stability import MIN_FREQUENCY
+
+Vec = NDArray[np.float64]
+Rows = NDArray[np.int64]
+
+MAX_TERMS = 4
+"""Most groups one empirical term holds: more is a model of its own, not a residual."""
+SHORTLIST = 6
+"""Groups that best fit what is left, each refitted with the model at each step; of those
+that earn on both splits and are material, the one that removes most held-out residual
+enters. The best fit on training rows alone may be a linear drift that the held-out rows
+(later in time) refute, where a saturating one holds."""
+MIN_OWN_SHARE = 0.05
+"""A group's own contribution on the held-out rows must reach this share of the excess
+held-out chi-square before it: with a many-parameter model refitted alongside, a group of
+negligible size can otherwise "earn" by letting the model's parameters move."""
+
+
+@dataclass(frozen=True)
+class BasisGroup:
+    """Basis columns that enter or leave the empirical term together."""
+
+    channel: str
+    """The residual channel it acts on, e.g. ``"tau_J_d4"``, ``"leg 3"``."""
+    variable: str
+    """What it follows, e.g. ``"q4"``, ``"dq2"``, ``"time"``, ``"stroke 3"``."""
+    shape: str
+    """One of :data:`SHAPES`' keys."""
+    label: str
+    """The basis in symbols, e.g. ``"sin, cos(2 pi q4 / 25.7 deg)"``."""
+    unit: str
+    """Unit of a coefficient."""
+    columns: Callable[[Rows], Vec]
+    """Whitened: (rows, k) values at the given rows for a channel-local group (``column``
+    set), or (rows x channels, k) over the whole whitened residual (``column`` None)."""
+    physical: Callable[[Rows], Vec]
+    """(rows, k) the basis in the channel's physical unit at the given rows: the term is
+    ``physical(rows) @ coefficients`` there (what a model file carries)."""
+    column: int | None = None
+    """Index of the residual channel (within a row) a channel-local group acts on."""
+    detail: Mapping[str, float] = field(default_factory=dict)
+    """Numbers its words use (a period [deg], a time constant [s], ...)."""
+
+    @property
+    def key(self) -> tuple[str, str, str]:
+        return self.channel, self.variable, self.shape
+
+
+SHAPES: dict[str, str] = {
+    "periodic": "periodic in {variable}, period {period_deg:.3g} deg, amplitude {amplitude}: looks "
+                "like transmission ripple (gear meshing, motor cogging)",
+    "reversal step": "a step of {step} at each reversal of {variable}: dry friction acting in "
+                     "this channel",
+    "stribeck": "a force opposing motion that falls from {amplitude} at standstill as {variable} "
+                "grows (~{speed:.2g} /s): friction that is higher near standstill (Stribeck)",
+    "proportional": "off by {coefficient} x {variable} ({amplitude} RMS): a scale error "
+                    "(encoder, screw lead or gear ratio)",
+    "drift": "a drift with time, {amplitude} over the recording ({profile}): thermal growth or "
+             "a sensor drift",
+}
+
+
+@dataclass(frozen=True)
+class Term:
+    group: BasisGroup
+    coefficients: Vec
+    """Physical units, one per column."""
+    heldout_drop: float
+    """Held-out chi-square removed when it entered."""
+    frequency: float
+    """Share of the resampled folds on which the same (channel, variable, shape) was selected."""
+    size: float
+    """Its size over all rows [unit of the channel]: the range a drift covers, else the RMS
+    of its contribution."""
+
+    def words(self) -> str:
+        g = self.group
+        amp = f"{self.size * np.sqrt(2.0) if g.shape == 'periodic' else self.size:.2g} {g.unit}"
+        text = SHAPES[g.shape].format(
+            variable=g.variable, amplitude=amp, coefficient=f"{self.coefficients[0]:.3g}", step=f"{2 * abs(self.coefficients[0]):.2g} {g.unit}",
+            period_deg=g.detail.get("period_deg", 0.0), speed=g.detail.get("speed", 0.0),
+            profile=g.label)
+        return f"{g.channel} {text}; not in the library"
+
+    def as_dict(self) -> dict[str, object]:
+        g = self.group
+        return {"channel": g.channel, "variable": g.variable, "shape": g.shape, "basis": g.label,
+                "unit": g.unit, "coefficients": [float(c) for c in self.coefficients],
+                "detail": {k: float(v) for k, v in g.detail.items()},
+                "heldout_chi2_drop": self.heldout_drop, "resampled_frequency": self.frequency,
+                "size": self.size, "hypothesis": self.words()}
+
+
+@dataclass(frozen=True)
+class EmpiricalTerm:
+    terms: tuple[Term, ...]
+    heldout_rms_before: float
+    heldout_rms_after: float
+    """Held-out whitened RMS with the kept terms added (1 = the stated noise)."""
+    rejected: tuple[str, ...] = ()
+    """Groups the main split selected but the folds did not, with their frequency."""
+
+    def words(self) -> str:
+        if not self.terms:
+            return "no empirical term holds up on held-out data and resampled folds"
+        return ("; ".join(t.words() for t in self.terms)
+                + f" (held-out {self.heldout_rms_before:.3g} -> {self.heldout_rms_after:.3g} "
+                  "x the stated noise with this empirical term)")
+
+    def as_dict(self) -> dict[str, object]:
+        return {"terms": [t.as_dict() for t in self.terms],
+                "heldout_rms_whitened_before": self.heldout_rms_before,
+                "heldout_rms_whitened_after": self.heldout_rms_after,
+                "rejected": list(self.rejected), "words": self.words()}
+
+
+def design(groups: list[BasisGroup], chosen: list[int], rows: Rows, n_channels: int,
+           cache: dict[tuple[int, int], Vec] | None = None) -> Vec:
+    """(rows x channels, sum k) whitened columns of the chosen groups over the whole residual."""
+    cache = {} if cache is None else cache
+    blocks: list[Vec] = []
+    for g in chosen:
+        x = _values(groups[g], rows, cache)
+        if groups[g].column is None:
+            blocks.append(x)
+        else:
+            full = np.zeros((len(rows), n_channels, x.shape[1]))
+            full[:, groups[g].column, :] = x
+            blocks.append(full.reshape(len(rows) * n_channels, -1))
+    return np.hstack(blocks) if blocks else np.zeros((len(rows) * n_channels, 0))
+
+
+def _values(group: BasisGroup, rows: Rows, cache: dict[tuple[int, int], Vec]) -> Vec:
+    key = (id(group), id(rows))
+    if key not in cache:
+        x = np.asarray(group.columns(rows), float)
+        cache[key] = x.reshape(len(rows) if group.column is not None else x.shape[0], -1)
+    return cache[key]
+
+
+def _drop(group: BasisGroup, x: Vec, r: Vec) -> float:
+    """Chi-square drop of projecting the residual ``r`` (rows, channels) onto ``x``."""
+    y = r[:, group.column] if group.column is not None else r.ravel()
+    coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+    fit = x @ coef
+    return float(2 * y @ fit - fit @ fit)
+
+
+def _screen(groups: list[BasisGroup], rows: Rows, r: Vec, cache: dict[tuple[int, int], Vec]
+            ) -> list[tuple[float, int]]:
+    """(score, group index): how much of what is left (``r``: rows x channels) each group
+    explains. A channel-local group: its projection (groups on different channels are
+    orthogonal). Groups over the whole residual that share a label (one leg each, say) can be
+    strongly correlated, and a signal of two of them may project best onto a third: each is
+    scored by what it adds to the others of its label, fitted together."""
+    out = []
+    dense: dict[str, list[int]] = {}
+    for i, g in enumerate(groups):
+        if g.column is None:
+            dense.setdefault(g.label, []).append(i)
+        else:
+            out.append((_drop(g, _values(g, rows, cache), r), i))
+    y = r.ravel()
+    for members in dense.values():
+        xs = [_values(groups[i], rows, cache) for i in members]
+        x = np.hstack(xs)
+        gram_inv = np.linalg.pinv(x.T @ x)
+        coef = gram_inv @ (x.T @ y)
+        edges = np.cumsum([0] + [b.shape[1] for b in xs])
+        for m, i in enumerate(members):
+            sl = slice(edges[m], edges[m + 1])
+            c = coef[sl]
+            # the chi-square the others cannot make up without this group
+            out.append((float(c @ np.linalg.pinv(gram_inv[sl, sl]) @ c), i))
+    return out
+
+
+Refit = Callable[[list[int]], tuple[Vec, Vec, Vec]]
+"""chosen group indices -> (training residual, held-out residual, coefficients) of the model
+refitted together with those groups."""
+
+
+def fixed_refit(groups: list[BasisGroup], r_train: Vec, r_held: Vec, train: Rows, held: Rows,
+                n_channels: int) -> Refit:
+    """The groups fitted to a fixed residual (the model's own parameters not refitted)."""
+    cache: dict[tuple[int, int], Vec] = {}
+
+    def refit(chosen: list[int]) -> tuple[Vec, Vec, Vec]:
+        x_t = design(groups, chosen, train, n_channels, cache)
+        coef = np.linalg.lstsq(x_t, r_train, rcond=None)[0] if chosen else np.zeros(0)
+        return (r_train - x_t @ coef,
+                r_held - design(groups, chosen, held, n_channels, cache) @ coef, coef)
+    return refit
+
+
+def select_terms(groups: list[BasisGroup], refit: Refit, train: Rows, held: Rows,
+                 n_channels: int, max_terms: int = MAX_TERMS) -> list[tuple[int, Vec, float]]:
+    """Forward selection: the group that best fits what is left enters, refitted with the
+    model, when it earns its columns on both splits. (group index, coefficients, held-out
+    chi-square drop) in the order they entered; the coefficients of the last joint fit."""
+    cache: dict[tuple[int, int], Vec] = {}
+    res_t, res_h, _ = refit([])
+    chosen: list[int] = []
+    drops: list[float] = []
+    coef = np.zeros(0)
+    while len(chosen) < max_terms:
+        r = res_t.reshape(len(train), n_channels)
+        taken = {groups[c].key for c in chosen}
+        scores = [(d, i) for d, i in _screen(groups, train, r, cache) if groups[i].key not in taken]
+        if not scores:
+            break
+        best = None
+        for _, i in sorted(scores, reverse=True)[:SHORTLIST]:
+            k = _values(groups[i], train, cache).shape[1]
+            new_t, new_h, new_coef = refit(chosen + [i])
+            train_drop = float(res_t @ res_t - new_t @ new_t)
+            held_drop = float(res_h @ res_h - new_h @ new_h)
+            # its own share of the held-out prediction, not the model's refit, must be material
+            own = design(groups, [i], held, n_channels, cache) @ new_coef[-k:]
+            material = float(own @ own) >= MIN_OWN_SHARE * max(float(res_h @ res_h) - res_h.size, 0.0)
+            if (train_drop > k * np.log(res_t.size) and held_drop > k * np.log(res_h.size)
+                    and material and (best is None or held_drop > best[1])):
+                best = i, held_drop, new_t, new_h, new_coef
+        if best is None:
+            break
+        chosen.append(best[0])
+        drops.append(best[1])
+        res_t, res_h, coef = best[2], best[3], best[4]
+    # a group that entered big and shrank once later ones came is no longer material: leave
+    # it out and refit the rest
+    held0 = refit([])[1] if chosen else np.zeros(0)
+    excess0 = max(float(held0 @ held0) - held0.size, 0.0)
+    while chosen:
+        sizes = np.cumsum([0] + [_values(groups[c], train, cache).shape[1] for c in chosen])
+        own = [design(groups, [g], held, n_channels, cache) @ coef[sizes[i]:sizes[i + 1]]
+               for i, g in enumerate(chosen)]
+        small = [i for i, o in enumerate(own) if float(o @ o) < MIN_OWN_SHARE * excess0]
+        if not small:
+            break
+        del chosen[small[0]], drops[small[0]]
+        res_t, res_h, coef = refit(chosen)
+    sizes = np.cumsum([0] + [_values(groups[c], train, cache).shape[1] for c in chosen])
+    return [(g, coef[sizes[i]:sizes[i + 1]], drops[i]) for i, g in enumerate(chosen)]
+
+
+def characterise(groups: list[BasisGroup], refit_on: Callable[[Rows, Rows], Refit],
+                 train: Rows, held: Rows, splits: list[tuple[Rows, Rows]], n_channels: int,
+                 every: Rows) -> EmpiricalTerm:
+    """The empirical term on the main split (``refit_on(train, held)``: how the model is
+    refitted with chosen groups on a split), each group kept only if the folds select it
+    again."""
+    main_refit = refit_on(train, held)
+    _, r_h, _ = main_refit([])
+    rms0 = float(np.sqrt(np.mean(r_h**2))) if r_h.size else 0.0
+    main = select_terms(groups, main_refit, train, held, n_channels)
+    if not main:
+        return EmpiricalTerm((), rms0, rms0)
+    counts = {groups[g].key: 0 for g, _, _ in main}
+    for f_train, f_held in splits:
+        for g, _, _ in select_terms(groups, refit_on(f_train, f_held), f_train, f_held,
+                                    n_channels):
+            if groups[g].key in counts:
+                counts[groups[g].key] += 1
+    n = max(len(splits), 1)
+    keep = [m for m in main if not splits or counts[groups[m[0]].key] / n >= MIN_FREQUENCY]
+    kept_idx = {g for g, _, _ in keep}
+    rejected = tuple(f"{groups[g].channel} {groups[g].shape} in {groups[g].variable} "
+                     f"(selected on {counts[groups[g].key]} of {n} folds)"
+                     for g, _, _ in main if g not in kept_idx)
+    if not keep:
+        return EmpiricalTerm((), rms0, rms0, rejected)
+    idx = [g for g, _, _ in keep]
+    _, after, coef = main_refit(idx)
+    sizes = np.cumsum([0] + [design(groups, [g], train[:1], n_channels).shape[1] for g in idx])
+    terms = tuple(Term(groups[g], coef[sizes[i]:sizes[i + 1]], d,
+                       counts[groups[g].key] / n, _size(groups[g], coef[sizes[i]:sizes[i + 1]], every))
+                  for i, (g, _, d) in enumerate(keep))
+    return EmpiricalTerm(terms, rms0, float(np.sqrt(np.mean(after**2))), rejected)
+
+
+def _size(group: BasisGroup, coef: Vec, every: Rows) -> float:
+    """Range (a drift) or RMS (any other shape) over all rows of the group's contribution,
+    in the channel's physical unit."""
+    x = np.asarray(group.physical(every), float) @ coef
+    return float(np.ptp(x)) if group.shape == "drift" else float(np.sqrt(np.mean(x**2)))

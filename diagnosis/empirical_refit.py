@@ -1,0 +1,102 @@
+"""The model refitted together with an empirical term: the family with the chosen basis
+groups as one more block, so that the baseline and the established effects take back what
+the missing physics had pushed into them (a ripple biases the tares; once it is modelled,
+the tares move back, and no drift is needed to make up the difference)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+from serpar.diagnosis.empirical import BasisGroup, Refit, design
+from serpar.diagnosis.family import Effect, Family
+from serpar.diagnosis.fit import Fit, earns, fit_model
+
+Vec = NDArray[np.float64]
+Rows = NDArray[np.int64]
+
+EMPIRICAL = "empirical"
+
+
+class WithTerm:
+    """``family`` plus the columns of the ``chosen`` groups as the block ``"empirical"``."""
+
+    def __init__(self, family: Family, groups: list[BasisGroup], chosen: list[int],
+                 n_channels: int) -> None:
+        self.inner, self.kind = family, family.kind
+        self.baseline, self.n_samples = family.baseline, family.n_samples
+        self._groups, self._chosen, self._channels = groups, list(chosen), n_channels
+        names = tuple(f"{groups[g].channel}:{groups[g].label}[{i}]" for g in chosen
+                      for i in range(design(groups, [g], np.zeros(1, np.int64), n_channels).shape[1]))
+        k = len(names)
+        units = tuple(groups[g].unit for g in chosen for _ in range(
+            design(groups, [g], np.zeros(1, np.int64), n_channels).shape[1]))
+        self.block = Effect(EMPIRICAL, "empirical term", names, units, np.zeros(k),
+                            np.full(k, -np.inf), np.full(k, np.inf))
+        self.effects = tuple(family.effects) + (self.block,)
+        if callable(getattr(family, "jacobian", None)):
+            self.jacobian = self._jacobian
+
+    def _inner(self, params: Mapping[str, Vec]) -> dict[str, Vec]:
+        return {n: v for n, v in params.items() if n != EMPIRICAL}
+
+    def residual(self, params: Mapping[str, Vec], rows: Rows) -> Vec:
+        r = self.inner.residual(self._inner(params), rows)
+        if EMPIRICAL in params:
+            r = r - design(self._groups, self._chosen, rows, self._channels) @ params[EMPIRICAL]
+        return r
+
+    def _jacobian(self, params: Mapping[str, Vec], rows: Rows) -> Vec:
+        inner = self.inner.jacobian(self._inner(params), rows)  # type: ignore[attr-defined]
+        if EMPIRICAL not in params:
+            return inner
+        return np.hstack([inner, -design(self._groups, self._chosen, rows, self._channels)])
+
+    def split(self, rng: np.random.Generator) -> tuple[Rows, Rows]:
+        return self.inner.split(rng)
+
+    def locate(self, rows: Rows, whitened: Vec) -> list:
+        return self.inner.locate(rows, whitened)
+
+
+def model_refit(family: Family, kept: Fit, overrides: Mapping[str, Effect],
+                groups: list[BasisGroup], n_channels: int) -> Callable[[Rows, Rows], Refit]:
+    """``refit_on(train, held)`` for :func:`~serpar.diagnosis.empirical.characterise`: the
+    kept model refitted on ``train``, alone or together with the chosen groups (on a
+    resampled fold the groups must then earn over the model fitted to the same rows, not over
+    one fitted to rows the fold holds out)."""
+
+    def refit_on(train: Rows, held: Rows) -> Refit:
+        alone = fit_model(family, kept.active, train, held, kept.params, overrides)
+
+        def refit(chosen: list[int]) -> tuple[Vec, Vec, Vec]:
+            if not chosen:
+                return (family.residual(alone.params, train),
+                        family.residual(alone.params, held), np.zeros(0))
+            w = WithTerm(family, groups, chosen, n_channels)
+            f = fit_model(w, kept.active + (EMPIRICAL,), train, held, kept.params, overrides)
+            return w.residual(f.params, train), w.residual(f.params, held), f.params[EMPIRICAL]
+        return refit
+    return refit_on
+
+
+def outweighed(family: Family, kept: Fit, overrides: Mapping[str, Effect],
+               groups: list[BasisGroup], chosen: list[int], n_channels: int, train: Rows,
+               held: Rows) -> list[str]:
+    """Established effects of ``kept`` that no longer earn their parameters over the model
+    with the empirical term in their place: what they explained, the empirical term explains
+    (a joint-position error standing in for one leg's encoder scale, say), so naming them
+    would name the wrong physics."""
+    if not chosen:
+        return []
+    w = WithTerm(family, groups, chosen, n_channels)
+    full = fit_model(w, kept.active + (EMPIRICAL,), train, held, kept.params, overrides)
+    out = []
+    for name in kept.active:
+        rest = tuple(a for a in kept.active if a != name) + (EMPIRICAL,)
+        without = fit_model(w, rest, train, held, kept.params, overrides)
+        if not earns(without, full)[2]:
+            out.append(name)
+    return out
