@@ -79,16 +79,21 @@ class Trial:
 WRONG = "none, stated sigma wrong"
 
 
-def plan(trials: int, seed: int, domains: tuple[str, ...]) -> list[tuple[str, str, float, int]]:
+def plan(trials: int, seed: int, domains: tuple[str, ...], library_only: bool = False
+         ) -> list[tuple[str, str, float, int]]:
     """(domain, effect, 'none' or WRONG, magnitude, twin seed) per trial: effects in equal
     shares, with 'none' and an effect-free recording that states its noise WRONG_SIGMA times
-    too small as two more choices per domain."""
+    too small as two more choices per domain. ``library_only``: no effect outside the
+    candidate library is drawn."""
     if trials < 1:
         raise ConfigError(f"--trials must be >= 1, got {trials}")
     bad = [d for d in domains if d not in DOMAINS]
     if bad:
         raise ConfigError(f"unknown domain(s) {bad}; valid: {', '.join(DOMAINS)}")
-    choices = [(d, e) for d in domains for e in ("none", WRONG, *domain_module(d).EFFECTS)]
+    def drawn(d: str) -> tuple[str, ...]:
+        out = getattr(domain_module(d), "OUT_OF_LIBRARY", ()) if library_only else ()
+        return tuple(e for e in domain_module(d).EFFECTS if e not in out)
+    choices = [(d, e) for d in domains for e in ("none", WRONG, *drawn(d))]
     rng = np.random.default_rng([seed, 77])
     out = []
     for k in range(trials):
@@ -197,9 +202,10 @@ def summarise(trials: list[Trial]) -> dict[str, object]:
 
 
 def blind_bench(trials: int, seed: int, domains: tuple[str, ...] = tuple(DOMAINS),
-                progress: Callable[[Trial], object] | None = None) -> list[Trial]:
+                progress: Callable[[Trial], object] | None = None,
+                library_only: bool = False) -> list[Trial]:
     out = []
-    for k, (d, e, mag, s) in enumerate(plan(trials, seed, domains)):
+    for k, (d, e, mag, s) in enumerate(plan(trials, seed, domains, library_only)):
         out.append(run_trial(k, d, e, mag, s))
         if progress is not None:
             progress(out[-1])

@@ -18,6 +18,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--domain", action="append",
                    help="restrict to a domain (repeatable): arm_static, arm_dynamics, stewart, "
                         "stewart_motion")
+    p.add_argument("--library-only", action="store_true",
+                   help="draw no effect outside the candidate library")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_blind_bench)
     return p
@@ -26,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def cmd_blind_bench(args: argparse.Namespace) -> int:
     domains = tuple(args.domain) if args.domain else tuple(DOMAINS)
     bar = progress(args.trials, "blind-bench", enabled=sys.stderr.isatty())
-    trials = blind_bench(args.trials, args.seed, domains, progress=lambda _t: bar.update(1))
+    trials = blind_bench(args.trials, args.seed, domains, progress=lambda _t: bar.update(1),
+                         library_only=args.library_only)
     bar.close()
     summary = summarise(trials)
     if args.json:
