@@ -67,6 +67,11 @@ class BasisGroup:
     """Numbers its words use (a period [deg], a time constant [s], ...)."""
 
     @property
+    def width(self) -> int:
+        """Number of its columns (coefficients)."""
+        return int(np.asarray(self.physical(np.zeros(1, np.int64))).shape[1])
+
+    @property
     def key(self) -> tuple[str, str, str]:
         return self.channel, self.variable, self.shape
 
@@ -296,7 +301,7 @@ def characterise(groups: list[BasisGroup], refit_on: Callable[[Rows, Rows], Refi
         return EmpiricalTerm((), rms0, rms0, rejected)
     idx = [g for g, _, _ in keep]
     _, after, coef = main_refit(idx)
-    sizes = np.cumsum([0] + [design(groups, [g], train[:1], n_channels).shape[1] for g in idx])
+    sizes = np.cumsum([0] + [groups[g].width for g in idx])
     terms = tuple(Term(groups[g], coef[sizes[i]:sizes[i + 1]], d,
                        counts[groups[g].key] / n, _size(groups[g], coef[sizes[i]:sizes[i + 1]], every))
                   for i, (g, _, d) in enumerate(keep))

@@ -29,10 +29,9 @@ class WithTerm:
         self.baseline, self.n_samples = family.baseline, family.n_samples
         self._groups, self._chosen, self._channels = groups, list(chosen), n_channels
         names = tuple(f"{groups[g].channel}:{groups[g].label}[{i}]" for g in chosen
-                      for i in range(design(groups, [g], np.zeros(1, np.int64), n_channels).shape[1]))
+                      for i in range(groups[g].width))
         k = len(names)
-        units = tuple(groups[g].unit for g in chosen for _ in range(
-            design(groups, [g], np.zeros(1, np.int64), n_channels).shape[1]))
+        units = tuple(groups[g].unit for g in chosen for _ in range(groups[g].width))
         self.block = Effect(EMPIRICAL, "empirical term", names, units, np.zeros(k),
                             np.full(k, -np.inf), np.full(k, np.inf))
         self.effects = tuple(family.effects) + (self.block,)
