@@ -42,6 +42,7 @@ from serpar.diagnosis.result import (
 )
 from serpar.diagnosis.stability import (
     N_FOLDS,
+    Rows,
     Assessment,
     assess,
     block_of,
@@ -157,7 +158,7 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
         raise IdentificationError(f"{family.kind}: training and held-out rows overlap")
     path, scores, fixed = forward_select(family, train, heldout, cfg, report)
     base, final = path[0], path[-1]
-    shares = _shares(path)
+    shares = _shares(family, path, heldout)
     if report and splits and final.active:
         report(f"resampling {len(splits)} folds")
     # the model (and the file written from it) holds the established effects only
@@ -218,15 +219,21 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
         empirical=empirical)
 
 
-def _shares(path: list[Fit]) -> dict[str, tuple[float, float]]:
+def _shares(family: Family, path: list[Fit], heldout: Rows) -> dict[str, tuple[float, float]]:
     """Per selected effect: the share of the baseline's excess held-out residual it removed
-    when it was added, and the share of what the effects before it left."""
+    when it was added, and the share of what the effects before it left on the held-out rows it
+    acts on (an effect on a few rows, the chamfer slides of an episode, is judged on those, not
+    on the arm's thousands)."""
     excess0, out = _excess(path[0]), {}
     for prev, fit in itertools.pairwise(path):
+        name = fit.active[-1]
         removed = _excess(prev) - _excess(fit)
-        out[fit.active[-1]] = (float(np.clip(removed / excess0 if excess0 > 0 else 0.0, 0, 1)),
-                               float(np.clip(removed / _excess(prev) if _excess(prev) > 0 else 0.0,
-                                             0, 1)))
+        without = {k: v for k, v in fit.params.items() if k != name}
+        reach = (family.residual(fit.params, heldout) - family.residual(without, heldout)) != 0
+        before = family.residual(prev.params, heldout)[reach]
+        left = (float(before @ before) - before.size) / max(prev.n_heldout, 1)
+        out[name] = (float(np.clip(removed / excess0 if excess0 > 0 else 0.0, 0, 1)),
+                     float(np.clip(removed / left if left > 0 else 0.0, 0, 1)))
     return out
 
 

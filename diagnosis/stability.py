@@ -52,6 +52,8 @@ class Resampled:
 
     effect: str
     folds: int
+    """Folds that hold out rows the effect acts on (one that acts on a few rows, the chamfer
+    slides of an episode, cannot be tested on a fold that holds out none of them)."""
     kept: int
     """Folds on which the effect earned its parameters over the model without it."""
     values: NDArray[np.float64]
@@ -127,18 +129,22 @@ def resample(family: Family, final: Fit, splits: list[tuple[Rows, Rows]],
     every = np.arange(int(family.n_samples))
     main = {n: _contribution(family, final.params, n, every) for n in names}
     kept = {n: 0 for n in names}
+    tried = {n: 0 for n in names}
     values: dict[str, list[NDArray[np.float64]]] = {n: [] for n in names}
     agree: dict[str, list[float]] = {n: [] for n in names}
     for train, held in splits:
         full = fit_model(family, names, train, held, start, overrides)
         for n in names:
             values[n].append(np.asarray(full.params[n], float))
+            if not np.any(_contribution(family, full.params, n, held)):
+                continue  # a fold that holds out none of the rows it acts on cannot test it
+            tried[n] += 1
             without = fit_model(family, tuple(a for a in names if a != n), train, held, start,
                                 overrides)
             if earns(without, full)[2]:
                 kept[n] += 1
                 agree[n].append(_cosine(_contribution(family, full.params, n, every), main[n]))
-    return {n: Resampled(n, len(splits), kept[n], np.array(values[n]),
+    return {n: Resampled(n, tried[n], kept[n], np.array(values[n]),
                          all(a >= MIN_AGREEMENT for a in agree[n]))
             for n in names}
 
@@ -167,7 +173,9 @@ def reasons_not_established(effect: Effect, values: NDArray[np.float64],
         more = f" and {len(pinned) - 3} more" if len(pinned) > 3 else ""
         why.append(f"pinned on its search bound: {shown}{more}")
     if resampled is not None:
-        if resampled.frequency < MIN_FREQUENCY:
+        if resampled.folds == 0:
+            why.append("no resampled fold holds out rows it acts on")
+        elif resampled.frequency < MIN_FREQUENCY:
             why.append(f"needed on {resampled.kept} of {resampled.folds} resampled folds "
                        f"(< {MIN_FREQUENCY:.0%})")
         elif not resampled.consistent:
