@@ -7,12 +7,15 @@ evaluated with ``mj_rne`` and no hand-written dynamics:
 * link inertia and payload are linear in standard inertial parameters, so their regressors
   are built once, at every sample and then windowed exactly like the channels (from the
   arm with all but one link massless, and from 10 reference payload bodies);
-* friction and sensor gain are linear regressors on the data and the nominal torque;
+* friction and sensor gain are linear regressors on the data and the nominal torque; the
+  Stribeck fall's regressor is tabulated on a grid of Stribeck speeds and interpolated in
+  log speed, so its one non-linear parameter is fitted too;
 * latency shifts the windowed command (a cubic spline) by the delay;
 * sensor timing shifts the link channel's model by the torque sensors' lag behind the
   encoders, to first order (minus lag x the windowed rate of the nominal link torque);
-* encoder offsets are evaluated exactly per call, ``mj_rne`` at the offset angles of the rows
-  asked for (a few hundred), so no linearisation error enters a fit.
+* encoder offsets and scale errors are evaluated exactly per call, ``mj_rne`` at the true
+  angles (and, for a scale, rates) of the rows asked for (a few hundred), so no linearisation
+  error enters a fit.
 
 Bounds admit unphysical signs (negative friction, mass or delay): an absent effect's estimate
 then scatters about zero with an honest uncertainty instead of piling up on a bound.
@@ -43,6 +46,13 @@ OFFSET_JOINTS = (2, 3, 4, 5, 6)
 """Joints whose encoder offset the dynamics can see: gravity is along joint 1's axis (its
 offset changes no torque), and joint 7 turns only the near-axial hand."""
 
+SCALE_JOINTS = (1, 2, 3, 4, 5, 6)
+"""Joints whose encoder scale the dynamics can see: joint 1's through the inertia its rates
+drive (gravity is along its axis), not joint 7's (it turns only the near-axial hand)."""
+SCALE_BOUND = 0.05
+"""Largest relative encoder scale error: a wrong gear ratio or resolution setting."""
+
+
 PAYLOAD_PARAMS = ("mass", "com_x", "com_y", "com_z", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
 """Link-7 (flange) axes; CoM from the flange origin; inertia tensor about the CoM. The
 x0 mass is not zero: at zero mass the CoM has no gradient to start from."""
@@ -51,6 +61,10 @@ STICK_VELOCITY = 0.01
 anywhere in [-Fc, Fc] (whatever balances the drive): rows weigh such samples as an interval,
 not a value. Above it the twin's MuJoCo frictionloss is >= 99 % of Fc, and the encoder
 velocity (central difference, noise ~1e-3 rad/s) has a certain sign."""
+STRIBECK_SPEEDS = np.geomspace(STICK_VELOCITY, 0.4, 20)
+"""[rad/s] Grid of the Stribeck regressor; the search range of the Stribeck speed (a fall
+below the speed at which a joint may be stuck could not be seen)."""
+
 
 BASELINE = Effect(
     "torque_tare", "torque sensor offsets (tares)", tuple(f"tare{j}" for j in J), ("N m",) * 7,
@@ -63,6 +77,12 @@ EFFECTS: tuple[Effect, ...] = (
            tuple(f"Fc{j}" for j in J) + tuple(f"Fv{j}" for j in J),
            ("N m",) * 7 + ("N m s/rad",) * 7, np.zeros(14),
            np.zeros(14), np.r_[np.full(7, 10.0), np.full(7, 5.0)], physical_lower=True),
+    Effect("stribeck_friction", "Stribeck friction (static friction above the Coulomb level, "
+           "falling off with speed: dFs exp(-(v/vs)^2), dFs = Fs - Fc)",
+           tuple(f"dFs{j}" for j in J) + ("vs",), ("N m",) * 7 + ("rad/s",),
+           np.r_[np.zeros(7), 0.05], np.r_[np.zeros(7), STRIBECK_SPEEDS[0]],
+           np.r_[np.full(7, 10.0), STRIBECK_SPEEDS[-1]],
+           physical_lower=(True,) * 7 + (False,)),
     Effect("payload", "unmodelled payload at the flange (mass, centre of mass, inertia about it)",
            PAYLOAD_PARAMS, ("kg", "m", "m", "m") + ("kg m^2",) * 6,
            np.r_[0.1, 0.0, 0.0, 0.05, np.zeros(6)],
@@ -81,6 +101,10 @@ EFFECTS: tuple[Effect, ...] = (
            tuple(f"offset{j}" for j in OFFSET_JOINTS), ("rad",) * len(OFFSET_JOINTS),
            np.zeros(len(OFFSET_JOINTS)), np.full(len(OFFSET_JOINTS), -0.2),
            np.full(len(OFFSET_JOINTS), 0.2)),
+    Effect("encoder_scale", "joint encoder scale errors (measured = true angle x (1 + s))",
+           tuple(f"scale{j}" for j in SCALE_JOINTS), ("1",) * len(SCALE_JOINTS),
+           np.zeros(len(SCALE_JOINTS)), np.full(len(SCALE_JOINTS), -SCALE_BOUND),
+           np.full(len(SCALE_JOINTS), SCALE_BOUND)),
 )
 
 
@@ -97,6 +121,9 @@ class EffectModels:
         self.coulomb = rows.at(np.sign(v) * moving)
         self.viscous = rows.at(v)
         self.stuck = rows.at((~moving).astype(float))
+        signed = np.sign(v) * moving
+        self.stribeck = np.stack([rows.at(signed * np.exp(-(v / vs) ** 2))
+                                  for vs in STRIBECK_SPEEDS])  # speeds x rows x 7
         # rows x joint x link, for the link channel (sensor timing) and the drive channel
         self.inertia_link, self.inertia_drive = self._per_link()
         self.base_link = dynamics.link_torque(terms.q_link, terms.dq_link, terms.ddq_link)
@@ -106,6 +133,7 @@ class EffectModels:
         full = dynamics.link_torque(terms.q_full, terms.dq_full, terms.a_full)
         self.link_rate = terms.rows.link_at(np.gradient(full, axis=0) * terms.rate)
         self._offset_cols = np.array(OFFSET_JOINTS) - 1
+        self._scale_cols = np.array(SCALE_JOINTS) - 1
 
     def _per_link(self) -> tuple[Vec, Vec]:
         """Torque of each link's own inertia, windowed per row like the channels: scaling a
@@ -142,6 +170,10 @@ class EffectModels:
             p = params["joint_friction"]
             drive += self.coulomb[rows] * p[:7] + self.viscous[rows] * p[7:]
             band += self.stuck[rows] * np.abs(p[:7])
+        if "stribeck_friction" in params:
+            p = params["stribeck_friction"]
+            drive += self._stribeck(float(p[7]), rows) * p[:7]
+            band += self.stuck[rows] * np.abs(p[:7])
         if "link_inertia" in params:
             link += self.inertia_link[rows] @ params["link_inertia"]
             drive += self.inertia_drive[rows] @ params["link_inertia"]
@@ -152,6 +184,9 @@ class EffectModels:
         if "encoder_offset" in params:
             link += self._offset_torque(params["encoder_offset"], rows, sensor=True)
             drive += self._offset_torque(params["encoder_offset"], rows, sensor=False)
+        if "encoder_scale" in params:
+            link += self._scaled_torque(params["encoder_scale"], rows, sensor=True)
+            drive += self._scaled_torque(params["encoder_scale"], rows, sensor=False)
         if "torque_sensor" in params:
             link += t.tau_link_model[rows] * params["torque_sensor"]
         if "latency" in params:
@@ -203,6 +238,22 @@ class EffectModels:
         q, dq, ddq = self._state(rows, sensor)
         q = q.copy()
         q[:, self._offset_cols] -= p  # true angle = measured - offset
+        base = self.base_link if sensor else self.base_drive
+        return self.dyn.link_torque(q, dq, ddq) - base[rows]
+
+    def _stribeck(self, speed: float, rows: NDArray[np.int64]) -> Vec:
+        """The Stribeck regressor at ``speed``, interpolated in log speed on the grid."""
+        x = np.log(np.clip(speed, STRIBECK_SPEEDS[0], STRIBECK_SPEEDS[-1]))
+        grid = np.log(STRIBECK_SPEEDS)
+        k = int(np.clip(np.searchsorted(grid, x) - 1, 0, len(grid) - 2))
+        w = (x - grid[k]) / (grid[k + 1] - grid[k])
+        return (1.0 - w) * self.stribeck[k][rows] + w * self.stribeck[k + 1][rows]
+
+    def _scaled_torque(self, s: Vec, rows: NDArray[np.int64], sensor: bool) -> Vec:
+        # true angle, rate and acceleration = measured / (1 + s)
+        q, dq, ddq = (x.copy() for x in self._state(rows, sensor))
+        for x in (q, dq, ddq):
+            x[:, self._scale_cols] /= 1.0 + s
         base = self.base_link if sensor else self.base_drive
         return self.dyn.link_torque(q, dq, ddq) - base[rows]
 

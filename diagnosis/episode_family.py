@@ -54,9 +54,10 @@ TARE_KNOT_S = 2.0
 sensor zeros walk (the cell's sensor model: 0.002 N m/sqrt(s), i.e. ~0.006 N m in 10 s, about
 twice a wrist joint's 1 ms-window noise); between knots 2 s apart the walk's bridge leaves
 ~0.001 N m. One knot per split block, so every knot is pinned by a training block."""
-MAX_EFFECTS = 5
-"""More than the engine's default 3: an episode holds the arm's dynamics (friction, the held
-part's mass, the cell's sensor timing) and its insertions' contact friction at once."""
+MAX_EFFECTS = 6
+"""More than the engine's default 3: an episode holds the arm's dynamics (friction and its
+Stribeck fall, the held part's mass, the cell's sensor timing and latency) and its insertions'
+contact friction at once; the resampling rules decide which of them are established."""
 MIN_SLIDES = 2
 """Chamfer slides an episode needs for the contact-friction candidate: one to fit, one to
 hold out."""

@@ -39,10 +39,11 @@ class Effect:
     x0: NDArray[np.float64]
     lower: NDArray[np.float64]
     upper: NDArray[np.float64]
-    physical_lower: bool = False
+    physical_lower: bool | tuple[bool, ...] = False
     """The lower bound is a physical limit (no friction, no compliance, no clearance), so a
     parameter resting on it says "absent here"; every other bound only limits the search, and
-    a parameter pinned on one means the candidate cannot be what the data show."""
+    a parameter pinned on one means the candidate cannot be what the data show. One flag for
+    all parameters, or one per parameter."""
     excess_words: str = ""
     """How to say a negative first parameter: something the nominal model has and the machine
     lacks (``"{value}"`` is replaced by its magnitude with unit), e.g. a payload of -0.7 kg."""
@@ -70,6 +71,16 @@ class Effect:
             raise IdentificationError(f"Effect {self.name!r}: lower bound above upper bound")
         if np.any(self.x0 < self.lower) or np.any(self.x0 > self.upper):
             raise IdentificationError(f"Effect {self.name!r}: x0 lies outside [lower, upper]")
+        if not isinstance(self.physical_lower, bool) and len(self.physical_lower) != n:
+            raise IdentificationError(f"Effect {self.name!r}: physical_lower has "
+                                      f"{len(self.physical_lower)} flags, param_names has {n}")
+
+    @property
+    def physical_lower_mask(self) -> NDArray[np.bool_]:
+        """Per parameter: is its lower bound a physical limit?"""
+        if isinstance(self.physical_lower, bool):
+            return np.full(self.n_params, self.physical_lower)
+        return np.array(self.physical_lower, bool)
 
     @property
     def n_params(self) -> int:
@@ -79,15 +90,16 @@ class Effect:
         """The same effect with only the parameters ``keep`` (indices into param_names)."""
         return replace(self, param_names=tuple(self.param_names[i] for i in keep),
                        units=tuple(self.units[i] for i in keep), x0=self.x0[keep],
-                       lower=self.lower[keep], upper=self.upper[keep])
+                       lower=self.lower[keep], upper=self.upper[keep],
+                       physical_lower=(self.physical_lower if isinstance(self.physical_lower, bool)
+                                       else tuple(self.physical_lower[i] for i in keep)))
 
     def pinned(self, values: NDArray[np.float64], rel_tol: float = 1e-3) -> list[int]:
         """Indices of the parameters that sit on a search bound (not a physical limit)."""
         span = np.maximum(self.upper - self.lower, 1e-300)
         at_lo = (values - self.lower) <= rel_tol * span
         at_hi = (self.upper - values) <= rel_tol * span
-        if self.physical_lower:
-            at_lo[:] = False
+        at_lo[self.physical_lower_mask] = False
         free = np.ones(self.n_params, bool)
         free[list(self.fixed)] = False
         return [int(i) for i in np.flatnonzero((at_lo | at_hi) & free)]

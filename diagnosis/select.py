@@ -42,8 +42,8 @@ from serpar.diagnosis.result import (
 )
 from serpar.diagnosis.stability import (
     N_FOLDS,
-    Rows,
     Assessment,
+    Rows,
     assess,
     block_of,
     combined_std,

@@ -31,7 +31,10 @@ from serpar.diagnosis.stewart_effects import (
     COMPLIANCE,
     ENCODER,
     GEOMETRY,
+    N_LEGS,
+    SCALE,
     THERMAL,
+    WARMING,
     candidate_effects,
     geometry_flat_index,
 )
@@ -64,6 +67,8 @@ class StewartFamily:
         geom = StewartConfig(**holds.config).geometry()  # type: ignore[arg-type]
         self.P, self.B = np.array(geom.P), np.array(geom.B)
         self.home = np.asarray(geom.home_pos)
+        self.stroke = holds.legs - StewartConfig(**holds.config).l_min  # type: ignore[arg-type]
+        """(n, 6) what each leg's encoder reads from its zero (the scale candidate's lever)."""
         self.duration_s = float(np.ptp(holds.time))
         self.n_samples = holds.n
         self.baseline: Effect | None = None
@@ -78,6 +83,7 @@ class StewartFamily:
         inst = np.r_[[holds.sigma_pos**2] * 3, [holds.sigma_rot**2] * 3]
         self.sigma = np.sqrt((inst[None, :] + leg_var) / holds.count[:, None])
         self._geo_idx = np.zeros(0, np.int64)
+        self._names: dict[str, tuple[str, ...]] = {}
         self._check_nominal()
         self.effects: tuple[Effect, ...] = candidate_effects(self, np.arange(holds.n))
         excluded = f"; {holds.n_excluded} samples in motion not used" if holds.n_excluded else ""
@@ -87,12 +93,29 @@ class StewartFamily:
         """Which geometric parameters a ``stewart_geometry`` block holds, in order."""
         if effect.name == GEOMETRY:
             self._geo_idx = np.array([geometry_flat_index(n) for n in effect.param_names])
+        self._names[effect.name] = effect.param_names
+
+    def _per_leg(self, params: Mapping[str, Vec], name: str) -> Vec:
+        """A per-leg block's values on all six legs (legs the rank test dropped at zero)."""
+        out = np.zeros(N_LEGS)
+        for n, v in zip(self._names.get(name, ()), params[name], strict=False):
+            if n[1:].isdigit():
+                out[int(n[1:]) - 1] = v
+        return out
+
+    def _warming(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
+                 ) -> tuple[Vec, float, Vec]:
+        """Per-leg saturating growth: (g (6,), rate [1/s], 1 - exp(-rate t) (n,))."""
+        names = self._names.get(WARMING, ())
+        values = dict(zip(names, params[WARMING], strict=False))
+        rate = float(values.get("rate", 3.0 / max(self.duration_s, 1e-9)))
+        return self._per_leg(params, WARMING), rate, 1.0 - np.exp(-rate * self.h.time[rows])
 
     # -- the model -------------------------------------------------------------------------
     def _model(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
                ) -> tuple[Vec, Vec, Vec, Vec, Vec, Vec]:
         """Joint tables P, B (6, 3), leg lengths before thermal growth and compliance (n, 6),
-        growth factor (n,), predicted pose (n, 3), (n, 3, 3)."""
+        growth factor (n, 6), predicted pose (n, 3), (n, 3, 3)."""
         h = self.h
         err = np.zeros(6 * len(COLUMNS))
         if GEOMETRY in params:
@@ -102,10 +125,15 @@ class StewartFamily:
         base = h.legs[rows] + err[:, 0]
         if ENCODER in params:
             base = base - params[ENCODER]
-        factor = np.ones(len(rows))
+        if SCALE in params:
+            base = base - self._per_leg(params, SCALE) * self.stroke[rows]
+        factor = np.ones((len(rows), N_LEGS))
         if THERMAL in params:
-            factor = 1.0 + params[THERMAL][0] * h.time[rows]
-        length = base * factor[:, None]
+            factor = factor + params[THERMAL][0] * h.time[rows, None]
+        if WARMING in params:
+            g, _, shape = self._warming(params, rows)
+            factor = factor + g * shape[:, None]
+        length = base * factor
         if COMPLIANCE in params:
             length = length - params[COMPLIANCE] * self.force[rows]
         pos, rot = forward_kinematics(P, B, length, h.pos[rows], h.rot[rows])
@@ -138,14 +166,25 @@ class StewartFamily:
                 ur = np.einsum("nij,njk->nik", u, rot)  # u_i^T R (platform-frame dP)
                 for k, flat in enumerate(self._geo_idx):
                     leg, col = divmod(int(flat), len(COLUMNS))
-                    dleg[:, leg, k] = (factor if col == 0 else -ur[:, leg, col - 1] if col < 4
+                    dleg[:, leg, k] = (factor[:, leg] if col == 0 else -ur[:, leg, col - 1] if col < 4
                                        else u[:, leg, col - 4])
             elif name == THERMAL:
                 dleg = (self.h.time[rows, None] * base)[..., None]
             elif name == COMPLIANCE:
                 dleg = -self.force[rows][:, :, None] * np.eye(6)[None]
             elif name == ENCODER:
-                dleg = -factor[:, None, None] * np.eye(6)[None]
+                dleg = -factor[:, :, None] * np.eye(6)[None]
+            elif name == SCALE:
+                legs = [int(n[1:]) - 1 for n in self._names[SCALE]]
+                dleg = (-factor * self.stroke[rows])[:, :, None] * np.eye(6)[None][:, :, legs]
+            elif name == WARMING:
+                g, rate, shape = self._warming(params, rows)
+                legs = [int(n[1:]) - 1 for n in self._names[WARMING] if n != "rate"]
+                dleg = (base * shape[:, None])[:, :, None] * np.eye(6)[None][:, :, legs]
+                if "rate" in self._names[WARMING]:
+                    t = self.h.time[rows]
+                    d_rate = base * g * (t * np.exp(-rate * t))[:, None]
+                    dleg = np.concatenate([dleg, d_rate[:, :, None]], axis=2)
             else:
                 raise IdentificationError(f"unknown Stewart effect {name!r}; valid: "
                                           f"{', '.join(e.name for e in self.effects)}")

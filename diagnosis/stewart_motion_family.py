@@ -36,6 +36,7 @@ from serpar.diagnosis.stewart_effects import (
     COMPLIANCE,
     ENCODER,
     GEOMETRY,
+    SCALE,
     full_effects,
     geometry_flat_index,
 )
@@ -105,6 +106,8 @@ class StewartMotionFamily:
         out = []
         for e in full_effects(0.0):
             if e.name == COMPLIANCE and self.s.load.payload_kg <= 0:
+                continue
+            if e.name == SCALE:  # not modelled for a moving platform (stewart_family.py is)
                 continue
             self.register(e)
             keep = independent_columns(self.jacobian({e.name: e.x0}, rows), 0)
@@ -184,7 +187,7 @@ class StewartMotionFamily:
                 track = self._legs(params, rows)[1][..., None]
             else:
                 raise IdentificationError(f"unknown Stewart motion effect {name!r}; valid: "
-                                          f"{', '.join(e.name for e in self.effects)}")
+                                          f"{', '.join(e.name for e in getattr(self, 'effects', ()))}")
             pose = -np.einsum("nij,njk->nik", jinv, dleg)
             track = np.zeros_like(pose) if track is None else track
             cols.append(np.concatenate([pose, track], axis=1) / self.sigma[rows][:, :, None])

@@ -25,6 +25,9 @@ from serpar.twins.arm_dynamics_twin import EFFECTS, OUT_OF_LIBRARY, make_twin
 
 IN_LIBRARY = tuple(e for e in EFFECTS if e not in OUT_OF_LIBRARY)
 """The twin effects the candidate library holds (the others: tests/test_diagnosis_empirical.py)."""
+SINGLE = tuple(e for e in IN_LIBRARY if e != "stribeck_friction")
+"""The ones one candidate alone explains (Stribeck friction is Coulomb + viscous + its fall:
+two candidates, tested on its own below)."""
 
 SEED = 0
 DURATION = 10.0
@@ -95,7 +98,7 @@ def test_effect_free_twin_no_effect_earns_its_parameters() -> None:
         assert not earns(base, fit)[2], name
 
 
-@pytest.mark.parametrize("effect", IN_LIBRARY)
+@pytest.mark.parametrize("effect", SINGLE)
 def test_true_effect_gives_the_largest_heldout_gain(effect: str) -> None:
     _, _, _, _, _, base = twin(effect)
     gain = {name: base.heldout_chi2 - fit.heldout_chi2 for name, fit in single_fits(effect).items()}
@@ -103,7 +106,7 @@ def test_true_effect_gives_the_largest_heldout_gain(effect: str) -> None:
     assert earns(base, single_fits(effect)[effect])[2]
 
 
-@pytest.mark.parametrize("effect", IN_LIBRARY)
+@pytest.mark.parametrize("effect", SINGLE)
 def test_fit_reaches_the_noise_floor_on_heldout_data(effect: str) -> None:
     _, _, _, _, _, base = twin(effect)
     fit = single_fits(effect)[effect]
@@ -117,7 +120,7 @@ _CHANCE_MISS = pytest.mark.xfail(strict=True, reason=(
 
 
 @pytest.mark.parametrize("effect", [pytest.param(e, marks=_CHANCE_MISS) if e == "joint_friction"
-                                    else e for e in IN_LIBRARY])
+                                    else e for e in SINGLE])
 def test_parameters_recovered_within_3_sigma(effect: str) -> None:
     """sigma: the fit's Jacobian covariance (Birge-scaled), engine-side."""
     _, answer, fam, _, _, _ = twin(effect)
@@ -128,7 +131,7 @@ def test_parameters_recovered_within_3_sigma(effect: str) -> None:
     assert np.all(np.abs(z) <= 3.0), dict(zip(block.param_names, z.round(2)))
 
 
-@pytest.mark.parametrize("effect", IN_LIBRARY)
+@pytest.mark.parametrize("effect", SINGLE)
 def test_tares_recover_the_torque_sensor_offsets(effect: str) -> None:
     """The always-fitted baseline: start-up offsets, plus the torque_sensor twin's own."""
     _, answer, fam, _, _, _ = twin(effect)
@@ -137,7 +140,7 @@ def test_tares_recover_the_torque_sensor_offsets(effect: str) -> None:
     assert np.all(np.abs(z) <= 3.0), z.round(2)
 
 
-@pytest.mark.parametrize("effect", (None,) + IN_LIBRARY)
+@pytest.mark.parametrize("effect", (None,) + SINGLE)
 def test_forward_selection_names_the_effect(effect: str | None) -> None:
     _, _, fam, _, _, _ = twin(effect)
     result = diagnose(fam, seed=SEED)
@@ -234,3 +237,24 @@ def test_too_short_a_recording_is_refused() -> None:
     short = Recording(short.meta, short.signals.slice(0, 1500))
     with pytest.raises(IdentificationError, match="windows of 51"):
         family_from_recording(short)
+
+
+def test_stribeck_friction_is_found_as_its_coulomb_level_and_its_fall() -> None:
+    """The twin's drives lose Fc + (Fs - Fc) exp(-(v/vs)^2) + Fv v with vs 0.02-0.08 rad/s per
+    joint: joint friction, then the Stribeck fall, both established and nothing else; one
+    shared vs within the twin's range; each joint's fall within a factor of 2 of the truth. One
+    shared vs for seven drives that each have their own leaves 1.8 x the noise on this 10 s
+    twin (seed 0; 1.5 x on the 20 s default): not within 3 sigma, and the verdict must say
+    that a structured residual remains rather than pass it as noise."""
+    _, answer, fam, _, _, _ = twin("stribeck_friction")
+    result = diagnose(fam, seed=SEED)
+    assert [f.effect for f in result.established] == ["joint_friction", "stribeck_friction"], \
+        result.verdict
+    assert result.heldout_rms_after < 0.05 * result.heldout_rms_before
+    assert result.residual.passes or "structured residual remains" in result.verdict
+    found = {p.name: p.value for f in result.established for p in f.params}
+    truth = answer["params"]
+    assert 0.02 <= found["vs"] <= 0.08
+    for j in range(1, 8):
+        excess = truth[f"Fs{j}"] - truth[f"Fc{j}"]
+        assert 0.5 * excess <= found[f"dFs{j}"] <= 2.0 * excess, (j, found[f"dFs{j}"], excess)

@@ -1,5 +1,5 @@
-"""Stewart twins whose effect lies outside the diagnosis library (twins/stewart_twin.py
-OUT_OF_LIBRARY): the physics each puts into the "real" platform, read back from the plant and
+"""Stewart twins that the blind bench also draws with their candidate withheld from the
+diagnosis library (twins/stewart_twin.py WITHHELD): the physics each puts into the "real" platform, read back from the plant and
 from the recording the way a metrologist would (motion capture through the nominal inverse
 kinematics against the leg encoders), and the validation of the plant's new Reality fields."""
 
@@ -23,6 +23,7 @@ from serpar.twins.stewart_twin import (
     OUT_OF_LIBRARY,
     STEEL_PER_K,
     UNITS,
+    WITHHELD,
     make_twin,
 )
 
@@ -48,14 +49,14 @@ def _holds(rec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def test_out_of_library_effects_are_registered() -> None:
-    assert OUT_OF_LIBRARY == ("leg_thermal_nonuniform", "leg_encoder_scale")
-    for effect in OUT_OF_LIBRARY:
+    assert OUT_OF_LIBRARY == () and WITHHELD == ("leg_thermal_nonuniform", "leg_encoder_scale")
+    for effect in WITHHELD:
         assert effect in EFFECTS and effect in UNITS and effect in DEFAULT_MAGNITUDE
         lo, hi = MAGNITUDE_RANGE[effect]
         assert 0 < lo < DEFAULT_MAGNITUDE[effect] < hi
 
 
-@pytest.mark.parametrize("effect", OUT_OF_LIBRARY)
+@pytest.mark.parametrize("effect", OUT_OF_LIBRARY + WITHHELD)
 def test_answer_carries_a_signature_and_stays_out_of_the_recording(effect: str) -> None:
     rec, answer = make_twin(effect, None, 1, n_poses=30)
     sig = answer["signature"]
@@ -167,7 +168,7 @@ def test_invalid_reality_is_refused_naming_the_valid_range(kwargs, message: str)
         Reality(**kwargs)
 
 
-@pytest.mark.parametrize("effect", OUT_OF_LIBRARY)
+@pytest.mark.parametrize("effect", OUT_OF_LIBRARY + WITHHELD)
 def test_bad_magnitude_names_the_range(effect: str) -> None:
     with pytest.raises(ConfigError, match="blind-bench range"):
         make_twin(effect, -1.0, 0)

@@ -44,6 +44,11 @@ NOT_APPLICABLE: dict[str, str] = {
                      "sensors have no gain",
     "sensor_timing": "when the torque sensors are sampled is the sensor model's timing, not the "
                      "arm's physics",
+    "stribeck_friction": "MuJoCo's frictionloss is one dry level (the Coulomb part, from "
+                         "joint_friction): a fall with speed needs a drive torque the cell's "
+                         "arm does not model",
+    "encoder_scale": "a transmission-ratio error between reading and link: a MuJoCo hinge has no "
+                     "gear between its qpos and the link angle",
     "contact_friction": "the journal/bore friction belongs to the cell's contacts, not the arm: "
                         "set the episode config's contact_friction to 0.2 + d_mu",
 }
