@@ -83,24 +83,38 @@ WITHHELD = " (candidate withheld)"
 """Suffix of a trial's effect whose candidate the diagnosis is run without."""
 
 
-def plan(trials: int, seed: int, domains: tuple[str, ...], library_only: bool = False
-         ) -> list[tuple[str, str, float, int]]:
+def plan(trials: int, seed: int, domains: tuple[str, ...], library_only: bool = False,
+         kinds: tuple[str, ...] | None = None) -> list[tuple[str, str, float, int]]:
     """(domain, effect, 'none' or WRONG, magnitude, twin seed) per trial: effects in equal
     shares, with 'none' and an effect-free recording that states its noise WRONG_SIGMA times
-    too small as two more choices per domain. ``library_only``: no effect outside the
-    candidate library is drawn, and no library effect with its candidate withheld."""
+    too small as two more choices per domain. ``kinds``: draw only trials of these kinds (of
+    :data:`KINDS`); ``library_only``: the kinds "effect", "none" and "wrong_sigma" (no effect
+    outside the candidate library, none with its candidate withheld)."""
     if trials < 1:
         raise ConfigError(f"--trials must be >= 1, got {trials}")
     bad = [d for d in domains if d not in DOMAINS]
     if bad:
         raise ConfigError(f"unknown domain(s) {bad}; valid: {', '.join(DOMAINS)}")
-    def drawn(d: str) -> tuple[str, ...]:
+    if library_only:
+        kinds = tuple(k for k in (kinds or tuple(KINDS)) if k != "outside")
+    unknown = [k for k in kinds or () if k not in KINDS]
+    if unknown:
+        raise ConfigError(f"unknown trial kind(s) {unknown}; valid: {', '.join(KINDS)}")
+
+    def kind(d: str, e: str) -> str:
         module = domain_module(d)
-        out = getattr(module, "OUT_OF_LIBRARY", ()) if library_only else ()
-        withheld = () if library_only else getattr(module, "WITHHELD", ())
-        return (tuple(e for e in module.EFFECTS if e not in out)
-                + tuple(e + WITHHELD for e in withheld))
-    choices = [(d, e) for d in domains for e in ("none", WRONG, *drawn(d))]
+        if e in ("none", WRONG):
+            return "none" if e == "none" else "wrong_sigma"
+        outside = e.endswith(WITHHELD) or e in getattr(module, "OUT_OF_LIBRARY", ())
+        return "outside" if outside else "effect"
+
+    choices = [(d, e) for d in domains
+               for e in ("none", WRONG, *domain_module(d).EFFECTS,
+                         *(w + WITHHELD for w in getattr(domain_module(d), "WITHHELD", ())))
+               if kinds is None or kind(d, e) in kinds]
+    if not choices:
+        raise ConfigError(f"no trial of kind(s) {', '.join(kinds or ())} in domain(s) "
+                          f"{', '.join(domains)}")
     rng = np.random.default_rng([seed, 77])
     out = []
     for k in range(trials):
@@ -157,7 +171,8 @@ def run_trial(index: int, domain: str, effect: str, magnitude: float, seed: int)
                  characterised, emp_rms)
 
 
-KINDS = {"effect": "hidden effect in the library: top established finding right",
+KINDS = {"effect": "hidden effect in the library: established, after nothing but parts of its "
+                   "own physics",
          "outside": "hidden effect outside the library: the empirical term's first group on "
                     "the right channel and variable, nothing else established",
          "none": "no effect: nothing established",
@@ -216,9 +231,10 @@ def summarise(trials: list[Trial]) -> dict[str, object]:
 
 def blind_bench(trials: int, seed: int, domains: tuple[str, ...] = tuple(DOMAINS),
                 progress: Callable[[Trial], object] | None = None,
-                library_only: bool = False) -> list[Trial]:
+                library_only: bool = False, kinds: tuple[str, ...] | None = None
+                ) -> list[Trial]:
     out = []
-    for k, (d, e, mag, s) in enumerate(plan(trials, seed, domains, library_only)):
+    for k, (d, e, mag, s) in enumerate(plan(trials, seed, domains, library_only, kinds)):
         out.append(run_trial(k, d, e, mag, s))
         if progress is not None:
             progress(out[-1])

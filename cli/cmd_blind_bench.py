@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from serpar.checks.blind_bench import RMS_TARGET, blind_bench, summarise
+from serpar.checks.blind_bench import KINDS, RMS_TARGET, blind_bench, summarise
 from serpar.cli.output import print_json, progress, table
 from serpar.twins.registry import DOMAINS
 
@@ -18,8 +18,12 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--domain", action="append",
                    help="restrict to a domain (repeatable): arm_static, arm_dynamics, stewart, "
                         "stewart_motion")
+    p.add_argument("--kind", action="append", choices=tuple(KINDS),
+                   help="draw only trials of this kind (repeatable): effect (in the library), "
+                        "outside (outside it, or its candidate withheld), none, wrong_sigma")
     p.add_argument("--library-only", action="store_true",
-                   help="draw no effect outside the candidate library")
+                   help="draw no effect outside the candidate library (the kinds effect, none "
+                        "and wrong_sigma)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_blind_bench)
     return p
@@ -29,7 +33,8 @@ def cmd_blind_bench(args: argparse.Namespace) -> int:
     domains = tuple(args.domain) if args.domain else tuple(DOMAINS)
     bar = progress(args.trials, "blind-bench", enabled=sys.stderr.isatty())
     trials = blind_bench(args.trials, args.seed, domains, progress=lambda _t: bar.update(1),
-                         library_only=args.library_only)
+                         library_only=args.library_only,
+                         kinds=tuple(args.kind) if args.kind else None)
     bar.close()
     summary = summarise(trials)
     if args.json:

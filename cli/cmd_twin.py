@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                     "(needed only with none; default arm_static)")
     p.add_argument("--magnitude", type=float,
                    help="size of the effect (units per domain twin module, e.g. "
-                        "twins/stewart_twin.py: K, m/N, m or x Table 5; default: its default "
+                        "twins/stewart_twin.py: K, m/N, m, 1 or x Table 5; default: its default "
                         "size)")
     p.add_argument("--sigma-error", type=float, default=1.0,
                    help="the recording states its noise sigma this many times too small "

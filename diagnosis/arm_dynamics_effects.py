@@ -77,6 +77,11 @@ EFFECTS: tuple[Effect, ...] = (
            tuple(f"Fc{j}" for j in J) + tuple(f"Fv{j}" for j in J),
            ("N m",) * 7 + ("N m s/rad",) * 7, np.zeros(14),
            np.zeros(14), np.r_[np.full(7, 10.0), np.full(7, 5.0)], physical_lower=True),
+    Effect("link_friction", "joint friction on the link side of the torque sensors (Coulomb + "
+           "viscous; bearings, seals: in the measured torque as in the command)",
+           tuple(f"Fc{j}" for j in J) + tuple(f"Fv{j}" for j in J),
+           ("N m",) * 7 + ("N m s/rad",) * 7, np.zeros(14),
+           np.zeros(14), np.r_[np.full(7, 10.0), np.full(7, 5.0)], physical_lower=True),
     Effect("stribeck_friction", "Stribeck friction (static friction above the Coulomb level, "
            "falling off with speed: dFs exp(-(v/vs)^2), dFs = Fs - Fc)",
            tuple(f"dFs{j}" for j in J) + ("vs",), ("N m",) * 7 + ("rad/s",),
@@ -121,6 +126,10 @@ class EffectModels:
         self.coulomb = rows.at(np.sign(v) * moving)
         self.viscous = rows.at(v)
         self.stuck = rows.at((~moving).astype(float))
+        # the same, windowed like the link-side sensor channel (friction the sensor reads)
+        self.coulomb_link = rows.link_at(np.sign(v) * moving)
+        self.viscous_link = rows.link_at(v)
+        self.stuck_link = rows.link_at((~moving).astype(float))
         signed = np.sign(v) * moving
         self.stribeck = np.stack([rows.at(signed * np.exp(-(v / vs) ** 2))
                                   for vs in STRIBECK_SPEEDS])  # speeds x rows x 7
@@ -157,18 +166,26 @@ class EffectModels:
         return np.stack(link, axis=2), np.stack(drive, axis=2)
 
     def contributions(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
-                      ) -> tuple[Vec, Vec, Vec]:
-        """(link, drive, band): torques the active effects add to each channel, and the
-        half-width of the interval the drive residual may lie in unexplained (stiction)."""
+                      ) -> tuple[Vec, Vec, Vec, Vec]:
+        """(link, drive, link band, drive band): torques the active effects add to each
+        channel, and the half-width of the interval each channel's residual may lie in
+        unexplained (static friction while a joint may be stuck)."""
         t = self.terms
         link = np.zeros((len(rows), 7))
         drive = np.zeros((len(rows), 7))
         band = np.zeros((len(rows), 7))
+        link_band = np.zeros((len(rows), 7))
         if "sensor_timing" in params:
             link -= self.link_rate[rows] * params["sensor_timing"][0]
         if "joint_friction" in params:
             p = params["joint_friction"]
             drive += self.coulomb[rows] * p[:7] + self.viscous[rows] * p[7:]
+            band += self.stuck[rows] * np.abs(p[:7])
+        if "link_friction" in params:
+            p = params["link_friction"]
+            link += self.coulomb_link[rows] * p[:7] + self.viscous_link[rows] * p[7:]
+            drive += self.coulomb[rows] * p[:7] + self.viscous[rows] * p[7:]
+            link_band += self.stuck_link[rows] * np.abs(p[:7])
             band += self.stuck[rows] * np.abs(p[:7])
         if "stribeck_friction" in params:
             p = params["stribeck_friction"]
@@ -194,7 +211,7 @@ class EffectModels:
             centre = t.rows.centre[rows].astype(float)
             # the drive delivered the command of `delay` ago: the model must explain that one
             drive -= t.command(centre - shift) - t.command(centre)
-        return link, drive, band
+        return link, drive, link_band, band
 
     def added_inertia(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec | None:
         """rows x 7 x 7: the inertia the active effects add to the nominal model (None: none)."""

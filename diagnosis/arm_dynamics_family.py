@@ -90,13 +90,14 @@ class ArmDynamicsFamily:
     def residual(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
         rows = np.asarray(rows, np.int64)
         t = self.terms
-        link_model, drive_model, band = self._models.contributions(params, rows)
+        link_model, drive_model, link_band, band = self._models.contributions(params, rows)
         link = t.link[rows] - link_model
         if BASELINE.name in params:
             link = link - self._tare(params[BASELINE.name], rows)
         drive = t.drive[rows] - drive_model
-        # stiction: within the band the drive's residual is static friction, not a misfit
+        # stiction: within the band a residual is static friction, not a misfit
         drive = np.sign(drive) * np.maximum(np.abs(drive) - band, 0.0)
+        link = np.sign(link) * np.maximum(np.abs(link) - link_band, 0.0)
         added = self._models.added_inertia(params, rows)
         if added is None:
             sigma_link, sigma_drive = t.sigma_link[rows], t.sigma_drive[rows]

@@ -174,7 +174,7 @@ def test_payload_regressor_matches_mujoco_with_the_body() -> None:
     t = fam.terms
     rows = np.arange(0, fam.n_samples, 7)
     direct = t.rows.at(dyn.link_torque(t.q_full, t.dq_full, t.a_full))[rows]
-    _, drive, _ = models.contributions({"payload": p}, rows)
+    _, drive, _, _ = models.contributions({"payload": p}, rows)
     assert np.max(np.abs(drive - direct)) < 1e-9
 
 

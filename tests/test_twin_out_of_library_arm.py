@@ -195,3 +195,22 @@ def test_drive_torque_values() -> None:
 def test_invalid_reality_is_refused(kwargs: dict, match: str) -> None:
     with pytest.raises(ConfigError, match=match):
         Reality(**kwargs)
+
+
+def test_link_side_friction_is_read_by_the_torque_sensors() -> None:
+    """The same friction (same magnitude and draws) inside the drive or on the link side moves
+    the arm the same way; only the link-side one is in tau_J: the difference of the two twins'
+    tau_J is Fc sign(dq) + Fv dq wherever a joint surely slides, and the command is the same."""
+    drive_side, answer = twin("joint_friction", 0.8)
+    link_side, _ = twin("link_friction", 0.8)
+    assert np.array_equal(columns(drive_side, ch.Q), columns(link_side, ch.Q))
+    assert np.array_equal(columns(drive_side, ch.TAU_J_D), columns(link_side, ch.TAU_J_D))
+    dq = columns(link_side, ch.DQ)
+    read = columns(link_side, ch.TAU_J) - columns(drive_side, ch.TAU_J)
+    fc = np.array([answer["params"][f"Fc{j}"] for j in range(1, 8)])
+    fv = np.array([answer["params"][f"Fv{j}"] for j in range(1, 8)])
+    sliding = np.abs(dq) > 0.05
+    expected = fc * np.sign(dq) + fv * dq
+    # the sensor averages over the period ending at the row, dq is read at the row: 0.5 ms
+    assert np.abs(read - expected)[sliding].max() < 0.05 * fc.max()
+    assert np.abs(read[~sliding]).max() <= 1.01 * (fc + fv * 0.05).max()

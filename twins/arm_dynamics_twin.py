@@ -19,6 +19,7 @@ Magnitude per effect (drawn from the range in :data:`MAGNITUDE_RANGE` when not g
 | latency | actuation delay [s] | — (0.1 ms resolution) |
 | sensor_timing | how late the torque sensors read against the encoders [s] | — (0.1 ms resolution; the simulated cell's own sensors read half a substep late, ~0.05 ms) |
 | encoder_offset | largest offset [rad] | offsets of joints 2-6 (joint 1's is invisible to dynamics: gravity is along its axis) |
+| link_friction | multiple of a real Panda's friction, as joint_friction | the same Coulomb + viscous friction, acting between the torque sensor and the link (bearings, seals): the sensor reads it, in tau_J as in tau_J_d |
 | stribeck_friction | multiple of a real Panda's friction, as joint_friction | joint_friction's Coulomb + viscous, plus a Stribeck excess (Fs - Fc) exp(-(v/vs)^2) against the motion: Fs/Fc 1.5-2.5, vs 0.02-0.08 rad/s per joint |
 | torque_ripple | amplitude A [N m] of A sin(2 pi q_j / P + phi) in one drive | the joint (2-6), the period P (10-45 deg), the phase |
 | encoder_scale | largest relative scale error abs(s) (encoder reads q (1 + s) about its zero, dq too) | its joint (2-4), the sign; half the time a second, smaller one on another joint of 2-6 |
@@ -59,11 +60,12 @@ PARTLY_IN_LIBRARY: dict[str, tuple[str, ...]] = {
 """Library effects that express part of an effect's physics (not a wrong finding when
 established with it, or for it while its candidate is withheld): Stribeck friction's Coulomb
 and viscous levels; a scale error's mean over the joint's travel, a constant offset."""
-EFFECTS: tuple[str, ...] = ("joint_friction", "payload", "link_inertia", "torque_sensor",
-                            "latency", "sensor_timing", "encoder_offset", "stribeck_friction",
-                            "encoder_scale", *OUT_OF_LIBRARY)
+EFFECTS: tuple[str, ...] = ("joint_friction", "link_friction", "payload", "link_inertia",
+                            "torque_sensor", "latency", "sensor_timing", "encoder_offset",
+                            "stribeck_friction", "encoder_scale", *OUT_OF_LIBRARY)
 MAGNITUDE_RANGE: dict[str, tuple[float, float]] = {
     "joint_friction": (0.2, 1.0),
+    "link_friction": (0.2, 1.0),
     "payload": (0.2, 1.5),
     "link_inertia": (0.1, 0.3),
     "torque_sensor": (0.02, 0.06),
@@ -252,6 +254,10 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int,
     signature: dict[str, object] | None = None
     if effect == "joint_friction":
         params = _friction(spec, magnitude, effect_rng)
+    elif effect == "link_friction":
+        params = _friction(spec, magnitude, effect_rng)
+        viscous = np.array([params[f"Fv{j + 1}"] for j in range(N_JOINTS)])
+        reality = Reality(link_side_friction=True, link_side_viscous=viscous)
     elif effect == "stribeck_friction":
         reality, params, signature = _stribeck(spec, magnitude, effect_rng)
     elif effect == "torque_ripple":

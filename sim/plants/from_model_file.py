@@ -7,6 +7,7 @@ arm_static_effects.py, kinematics/mdh.py):
 | effect | parameters | plant |
 |---|---|---|
 | joint_friction | Fc<j> [N m], Fv<j> [N m s/rad] | joint ``frictionloss`` = Fc; ``damping`` = nominal + Fv |
+| link_friction | as joint_friction | added to the same (the cell's sensors then read it as drive friction: noted) |
 | payload | mass, com_x/y/z (from the flange), Ixx..Iyz (about the CoM) | a body on link 7 at the flange |
 | link_inertia | link<j> (relative) | link j's mass and inertia x (1 + link<j>) |
 | encoder_offset | offset<j> = measured - true [rad] | joint ``ref`` = offset |
@@ -77,18 +78,24 @@ def _names(effect: str, block: ParamBlock, valid: tuple[str, ...]) -> dict[str, 
     return block.as_dict()
 
 
-def _friction(block: ParamBlock, d: _Draft) -> None:
-    p = _names("joint_friction", block, tuple(f"Fc{j}" for j in J) + tuple(f"Fv{j}" for j in J))
+def _friction(block: ParamBlock, d: _Draft, effect: str = "joint_friction") -> None:
+    p = _names(effect, block, tuple(f"Fc{j}" for j in J) + tuple(f"Fv{j}" for j in J))
     loss, damping = d.per_joint("frictionloss", (0.0,) * 7), d.per_joint("damping", d.nominal_damping)
     for j in J:
         fc, fv = p.get(f"Fc{j}", 0.0), p.get(f"Fv{j}", 0.0)
-        loss[j - 1] = max(fc, 0.0)
-        damping[j - 1] = max(d.nominal_damping[j - 1] + fv, 0.0)
+        loss[j - 1] += max(fc, 0.0)
         if fc < 0:  # the fit admits negative values so that an absent effect is not biased
-            d.notes.append(f"joint_friction Fc{j} = {fc:.3g} N m < 0: applied as 0")
-        if d.nominal_damping[j - 1] + fv < 0:
-            d.notes.append(f"joint_friction Fv{j} = {fv:.3g} N m s/rad takes the damping below "
+            d.notes.append(f"{effect} Fc{j} = {fc:.3g} N m < 0: applied as 0")
+        if damping[j - 1] + fv < 0:
+            d.notes.append(f"{effect} Fv{j} = {fv:.3g} N m s/rad takes the damping below "
                            "0: applied as 0")
+        damping[j - 1] = max(damping[j - 1] + fv, 0.0)
+
+
+def _link_friction(block: ParamBlock, d: _Draft) -> None:
+    _friction(block, d, "link_friction")
+    d.notes.append("link_friction: applied as joint friction (the motion is the same); the "
+                   "cell's torque sensors read it as friction inside the drive")
 
 
 def _payload(block: ParamBlock, d: _Draft) -> None:
@@ -161,7 +168,7 @@ def _latency(block: ParamBlock, d: _Draft) -> None:
 
 
 APPLY: dict[str, Callable[[ParamBlock, _Draft], None]] = {
-    "joint_friction": _friction, "payload": _payload, "link_inertia": _links,
+    "joint_friction": _friction, "link_friction": _link_friction, "payload": _payload, "link_inertia": _links,
     "encoder_offset": _offsets, "encoder": _encoder, "geometric": _geometric,
     "latency": _latency,
 }

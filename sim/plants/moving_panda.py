@@ -103,11 +103,17 @@ class Reality:
     ripple: tuple[tuple[int, float, float, float], ...] = ()
     """Position-periodic transmission ripple, one (joint index 0-6, amplitude [N m], period
     [rad], phase [rad]) per rippling joint: the drive adds A sin(2 pi q / period + phase)."""
+    link_side_friction: bool = False
+    """The joints' dry friction (MuJoCo's frictionloss) acts between the torque sensor and the
+    link (output bearings, seals), so the sensors read it: the drive must pass it through."""
+    link_side_viscous: Vec = field(default_factory=lambda: np.zeros(N_JOINTS))
+    """The part of each joint's damping [N m s/rad] that acts on the link side of the sensor."""
 
     def __post_init__(self) -> None:
         for name, lo, hi in (("torque_gain", -np.inf, np.inf), ("torque_bias", -np.inf, np.inf),
                              ("encoder_offset", -np.inf, np.inf), ("encoder_scale", -0.05, 0.05),
-                             ("stribeck_excess", 0.0, 5.0), ("stribeck_speed", 1e-3, 1.0)):
+                             ("stribeck_excess", 0.0, 5.0), ("stribeck_speed", 1e-3, 1.0),
+                             ("link_side_viscous", 0.0, 5.0)):
             v = np.asarray(getattr(self, name), float)
             if v.shape != (N_JOINTS,) or not np.all(np.isfinite(v)):
                 raise ConfigError(f"Reality.{name} needs {N_JOINTS} finite values")
@@ -232,6 +238,8 @@ def simulate(model: mujoco.MjModel, reality: Reality, noise: SensorNoise, durati
     bias = rng.normal(0.0, noise.torque_bias_std, N_JOINTS) + reality.torque_bias
     drive_noise = rng.normal(0.0, noise.actuation_std, (n, N_JOINTS))
     drive_torque = reality.drive_torque()  # None: no extra drive physics, no per-substep cost
+    link_side = reality.link_side_friction or bool(np.any(reality.link_side_viscous))
+    friction_row = mujoco.mjtConstraint.mjCNSTR_FRICTION_DOF
     kp, kd = np.asarray(KP), np.asarray(KD)
     delay_steps = round(reality.delay / physics.timestep)
 
@@ -274,8 +282,18 @@ def simulate(model: mujoco.MjModel, reality: Reality, noise: SensorNoise, durati
             ctrl[:] = new if g % sub else 0.5 * (old + new)  # a jump: centred on t_n
             if drive_torque is not None:  # acts in the drive, before the link-side sensor
                 extra[:] = drive_torque(q_true, dq_true)
+            if link_side:  # the link-side damping at the substep's start, as the sensors see it
+                viscous = reality.link_side_viscous * dq_true
             mujoco.mj_step(model, data)  # sensors at the substep's start state and torque
             history[k * sub + s] = torque
+            if link_side:
+                # MuJoCo's sensor reads the torque that moves the link (motor + friction); a
+                # sensor before the link-side friction reads what the drive passes through
+                history[k * sub + s] += viscous
+                if reality.link_side_friction:
+                    rows = data.efc_type[:data.nefc] == friction_row
+                    np.subtract.at(history[k * sub + s], data.efc_id[:data.nefc][rows],
+                                   data.efc_force[:data.nefc][rows])
             if s == 0:
                 # the substep at t_k closes the previous period: now its mean is known
                 end = k * sub - lag  # a lagging sensor's period ended `lag` substeps ago
