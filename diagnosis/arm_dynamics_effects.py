@@ -25,18 +25,15 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from serpar.diagnosis.arm_dynamics_payload import payload_model, set_payload, standard_parameters
 from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.family import Effect
 from serpar.sim.rigid_arm import (
-    FLANGE_BODY,
-    FLANGE_Z,
     LINK_BODIES,
     ArmDynamics,
-    rigid_arm_spec,
 )
 
 Vec = NDArray[np.float64]
@@ -64,6 +61,7 @@ velocity (central difference, noise ~1e-3 rad/s) has a certain sign."""
 STRIBECK_SPEEDS = np.geomspace(STICK_VELOCITY, 0.4, 20)
 """[rad/s] Grid of the Stribeck regressor; the search range of the Stribeck speed (a fall
 below the speed at which a joint may be stuck could not be seen)."""
+LOG_STRIBECK_SPEEDS = np.log(STRIBECK_SPEEDS)
 
 
 BASELINE = Effect(
@@ -199,11 +197,13 @@ class EffectModels:
             link += self.payload_link[rows] @ phi
             drive += self.payload_drive[rows] @ phi
         if "encoder_offset" in params:
-            link += self._offset_torque(params["encoder_offset"], rows, sensor=True)
-            drive += self._offset_torque(params["encoder_offset"], rows, sensor=False)
+            o = params["encoder_offset"]
+            link += self._true_state_torque(rows, True, offset=o)
+            drive += self._true_state_torque(rows, False, offset=o)
         if "encoder_scale" in params:
-            link += self._scaled_torque(params["encoder_scale"], rows, sensor=True)
-            drive += self._scaled_torque(params["encoder_scale"], rows, sensor=False)
+            s = params["encoder_scale"]
+            link += self._true_state_torque(rows, True, scale=s)
+            drive += self._true_state_torque(rows, False, scale=s)
         if "torque_sensor" in params:
             link += t.tau_link_model[rows] * params["torque_sensor"]
         if "latency" in params:
@@ -234,14 +234,14 @@ class EffectModels:
         link 7 (mass, first moments, inertia about the link-7 origin), windowed like the
         channels. Inverse dynamics is linear in these, so torques of 10 payload bodies with
         independent parameter vectors, evaluated at every sample, give the regressor."""
-        dyn, body = _payload_model()
+        dyn, body = payload_model()
         model, t = dyn.model, self.terms
         rng = np.random.default_rng(0)
         phis, link, drive, mass = [], [], [], []
         for _ in range(10):
             p = np.r_[rng.uniform(0.5, 2.0), rng.uniform(-0.1, 0.1, 3), rng.uniform(0.0, 0.01, 6)]
             p[4:7] += 0.02  # diagonal-dominant: a positive-definite tensor
-            _set_payload(model, body, p)
+            set_payload(model, body, p)
             phis.append(standard_parameters(p))
             tau = dyn.link_torque(t.q_full, t.dq_full, t.a_full)
             link.append(t.rows.link_at(tau))
@@ -251,63 +251,24 @@ class EffectModels:
         self.payload_mass = np.stack(mass, axis=3) @ inv  # rows x 7 x 7 x 10
         return np.stack(link, axis=2) @ inv, np.stack(drive, axis=2) @ inv
 
-    def _offset_torque(self, p: Vec, rows: NDArray[np.int64], sensor: bool) -> Vec:
-        q, dq, ddq = self._state(rows, sensor)
-        q = q.copy()
-        q[:, self._offset_cols] -= p  # true angle = measured - offset
+    def _true_state_torque(self, rows: NDArray[np.int64], sensor: bool, offset: Vec | None = None,
+                           scale: Vec | None = None) -> Vec:
+        """What the model's torque changes by at the true joint state: the angle measured minus
+        an offset (joints OFFSET_JOINTS), or angle, rate and acceleration measured / (1 + s)
+        (joints SCALE_JOINTS)."""
+        q, dq, ddq = (x.copy() for x in self._state(rows, sensor))
+        if offset is not None:
+            q[:, self._offset_cols] -= offset
+        if scale is not None:
+            for x in (q, dq, ddq):
+                x[:, self._scale_cols] /= 1.0 + scale
         base = self.base_link if sensor else self.base_drive
         return self.dyn.link_torque(q, dq, ddq) - base[rows]
 
     def _stribeck(self, speed: float, rows: NDArray[np.int64]) -> Vec:
         """The Stribeck regressor at ``speed``, interpolated in log speed on the grid."""
         x = np.log(np.clip(speed, STRIBECK_SPEEDS[0], STRIBECK_SPEEDS[-1]))
-        grid = np.log(STRIBECK_SPEEDS)
+        grid = LOG_STRIBECK_SPEEDS
         k = int(np.clip(np.searchsorted(grid, x) - 1, 0, len(grid) - 2))
         w = (x - grid[k]) / (grid[k + 1] - grid[k])
         return (1.0 - w) * self.stribeck[k][rows] + w * self.stribeck[k + 1][rows]
-
-    def _scaled_torque(self, s: Vec, rows: NDArray[np.int64], sensor: bool) -> Vec:
-        # true angle, rate and acceleration = measured / (1 + s)
-        q, dq, ddq = (x.copy() for x in self._state(rows, sensor))
-        for x in (q, dq, ddq):
-            x[:, self._scale_cols] /= 1.0 + s
-        base = self.base_link if sensor else self.base_drive
-        return self.dyn.link_torque(q, dq, ddq) - base[rows]
-
-
-def standard_parameters(p: Vec) -> Vec:
-    """(mass, CoM from the flange, inertia about the CoM) -> (m, m c, inertia about the link-7
-    origin: xx, yy, zz, xy, xz, yz), in which inverse dynamics is linear."""
-    m = p[0]
-    c = np.array([p[1], p[2], FLANGE_Z + p[3]])
-    i_com = np.array([[p[4], p[7], p[8]], [p[7], p[5], p[9]], [p[8], p[9], p[6]]])
-    i_o = i_com + m * (c @ c * np.eye(3) - np.outer(c, c))  # parallel axes
-    return np.r_[m, m * c, i_o[0, 0], i_o[1, 1], i_o[2, 2], i_o[0, 1], i_o[0, 2], i_o[1, 2]]
-
-
-def _set_payload(model: mujoco.MjModel, body: int, p: Vec) -> None:
-    model.body_mass[body] = p[0]
-    model.body_ipos[body] = [p[1], p[2], FLANGE_Z + p[3]]
-    i = np.array([[p[4], p[7], p[8]], [p[7], p[5], p[9]], [p[8], p[9], p[6]]])
-    w, axes = np.linalg.eigh(i)
-    if np.linalg.det(axes) < 0:
-        axes[:, 0] *= -1.0
-    model.body_inertia[body] = w
-    mujoco.mju_mat2Quat(model.body_iquat[body], axes.ravel())
-
-
-def _payload_model() -> tuple[ArmDynamics, int]:
-    """The arm with a payload body on link 7 and every other body massless: its inverse
-    dynamics is the payload's torque alone (body set by :func:`_set_payload`)."""
-    spec = rigid_arm_spec()
-    body = spec.body(FLANGE_BODY).add_body(name="diagnosis_payload", pos=[0, 0, 0])
-    body.mass, body.inertia, body.explicitinertial = 1.0, [1e-6, 1e-6, 1e-6], True
-    # an inertial frame off the body frame (position and rotation) at compile time: else
-    # MuJoCo marks the body "sameframe" and ignores later edits of body_ipos / body_iquat
-    body.ipos = [0.01, 0.02, FLANGE_Z + 0.03]
-    body.iquat = [0.9, 0.1, 0.2, 0.3]
-    model = spec.compile()
-    b = model.body("diagnosis_payload").id
-    model.body_mass[:] = 0.0
-    model.body_inertia[:] = 0.0
-    return ArmDynamics(model), b

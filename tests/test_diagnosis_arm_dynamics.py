@@ -14,8 +14,9 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from serpar.diagnosis.arm_dynamics_effects import EffectModels, _payload_model, _set_payload
+from serpar.diagnosis.arm_dynamics_effects import EffectModels
 from serpar.diagnosis.arm_dynamics_family import CHANNELS, family_from_recording
+from serpar.diagnosis.arm_dynamics_payload import payload_model, set_payload
 from serpar.diagnosis.family import Family
 from serpar.diagnosis.fit import fit_model
 from serpar.diagnosis.select import at_noise_floor, diagnose, earns
@@ -169,8 +170,8 @@ def test_payload_regressor_matches_mujoco_with_the_body() -> None:
     _, _, fam, _, _, _ = twin(None)
     models: EffectModels = fam._models
     p = np.array([0.8, 0.02, -0.03, 0.06, 1e-3, 2e-3, 1.5e-3, 2e-4, -1e-4, 3e-4])
-    dyn, body = _payload_model()
-    _set_payload(dyn.model, body, p)
+    dyn, body = payload_model()
+    set_payload(dyn.model, body, p)
     t = fam.terms
     rows = np.arange(0, fam.n_samples, 7)
     direct = t.rows.at(dyn.link_torque(t.q_full, t.dq_full, t.a_full))[rows]

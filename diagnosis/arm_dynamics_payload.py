@@ -1,0 +1,51 @@
+"""A rigid payload on the arm's flange for the arm-dynamics diagnosis: its standard inertial
+parameters (in which inverse dynamics is linear) and the massless arm that carries only it,
+whose inverse dynamics builds the payload candidate's regressor (arm_dynamics_effects.py)."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from serpar.sim.rigid_arm import FLANGE_BODY, FLANGE_Z, ArmDynamics, rigid_arm_spec
+
+Vec = NDArray[np.float64]
+
+
+def standard_parameters(p: Vec) -> Vec:
+    """(mass, CoM from the flange, inertia about the CoM) -> (m, m c, inertia about the link-7
+    origin: xx, yy, zz, xy, xz, yz), in which inverse dynamics is linear."""
+    m = p[0]
+    c = np.array([p[1], p[2], FLANGE_Z + p[3]])
+    i_com = np.array([[p[4], p[7], p[8]], [p[7], p[5], p[9]], [p[8], p[9], p[6]]])
+    i_o = i_com + m * (c @ c * np.eye(3) - np.outer(c, c))  # parallel axes
+    return np.r_[m, m * c, i_o[0, 0], i_o[1, 1], i_o[2, 2], i_o[0, 1], i_o[0, 2], i_o[1, 2]]
+
+
+def set_payload(model: mujoco.MjModel, body: int, p: Vec) -> None:
+    model.body_mass[body] = p[0]
+    model.body_ipos[body] = [p[1], p[2], FLANGE_Z + p[3]]
+    i = np.array([[p[4], p[7], p[8]], [p[7], p[5], p[9]], [p[8], p[9], p[6]]])
+    w, axes = np.linalg.eigh(i)
+    if np.linalg.det(axes) < 0:
+        axes[:, 0] *= -1.0
+    model.body_inertia[body] = w
+    mujoco.mju_mat2Quat(model.body_iquat[body], axes.ravel())
+
+
+def payload_model() -> tuple[ArmDynamics, int]:
+    """The arm with a payload body on link 7 and every other body massless: its inverse
+    dynamics is the payload's torque alone (body set by :func:`set_payload`)."""
+    spec = rigid_arm_spec()
+    body = spec.body(FLANGE_BODY).add_body(name="diagnosis_payload", pos=[0, 0, 0])
+    body.mass, body.inertia, body.explicitinertial = 1.0, [1e-6, 1e-6, 1e-6], True
+    # an inertial frame off the body frame (position and rotation) at compile time: else
+    # MuJoCo marks the body "sameframe" and ignores later edits of body_ipos / body_iquat
+    body.ipos = [0.01, 0.02, FLANGE_Z + 0.03]
+    body.iquat = [0.9, 0.1, 0.2, 0.3]
+    model = spec.compile()
+    b = model.body("diagnosis_payload").id
+    model.body_mass[:] = 0.0
+    model.body_inertia[:] = 0.0
+    return ArmDynamics(model), b
