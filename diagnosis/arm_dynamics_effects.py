@@ -6,7 +6,9 @@ evaluated with ``mj_rne`` and no hand-written dynamics:
 
 * link inertia and payload are linear in standard inertial parameters, so their regressors
   are built once, at every sample and then windowed exactly like the channels (from the
-  arm with all but one link massless, and from 10 reference payload bodies);
+  arm with all but one link massless, and from 10 reference payload bodies); the payload's
+  inertia is fitted through its extent (sim/plants/arm_changes.py), so every fitted tensor
+  is a rigid body's;
 * friction and sensor gain are linear regressors on the data and the nominal torque; the
   Stribeck fall's regressor is tabulated on a grid of Stribeck speeds and interpolated in
   log speed, so its one non-linear parameter is fitted too;
@@ -17,8 +19,10 @@ evaluated with ``mj_rne`` and no hand-written dynamics:
   angles (and, for a scale, rates) of the rows asked for (a few hundred), so no linearisation
   error enters a fit.
 
-Bounds admit unphysical signs (negative friction, mass or delay): an absent effect's estimate
-then scatters about zero with an honest uncertainty instead of piling up on a bound.
+Friction and the payload's extent are fitted under their physical bounds (>= 0). Mass, link
+inertia, gain and delay errors may take either sign: a nominal model can carry too much as well
+as too little, and an absent effect's estimate then scatters about zero with an honest
+uncertainty instead of piling up on a bound.
 """
 
 from __future__ import annotations
@@ -28,9 +32,15 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import NDArray
 
-from serpar.diagnosis.arm_dynamics_payload import payload_model, set_payload, standard_parameters
+from serpar.diagnosis.arm_dynamics_payload import (
+    payload_inertial,
+    payload_model,
+    set_payload,
+    standard_parameters,
+)
 from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.family import Effect
+from serpar.sim.plants.arm_changes import EXTENT
 from serpar.sim.rigid_arm import (
     LINK_BODIES,
     ArmDynamics,
@@ -50,7 +60,10 @@ SCALE_BOUND = 0.05
 """Largest relative encoder scale error: a wrong gear ratio or resolution setting."""
 
 
-PAYLOAD_PARAMS = ("mass", "com_x", "com_y", "com_z", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
+PAYLOAD_PARAMS = ("mass", "com_x", "com_y", "com_z") + EXTENT
+EXTENT_DIAGONAL = np.array([n[1] == n[2] for n in EXTENT])
+EXTENT_START = np.where(EXTENT_DIAGONAL, 0.03, 0.0)
+"""[m] A small body's extent: the search starts off L = 0, where the inertia's slope is 0."""
 """Link-7 (flange) axes; CoM from the flange origin; inertia tensor about the CoM. The
 x0 mass is not zero: at zero mass the CoM has no gradient to start from."""
 STICK_VELOCITY = 0.01
@@ -86,11 +99,13 @@ EFFECTS: tuple[Effect, ...] = (
            np.r_[np.zeros(7), 0.05], np.r_[np.zeros(7), STRIBECK_SPEEDS[0]],
            np.r_[np.full(7, 10.0), STRIBECK_SPEEDS[-1]],
            physical_lower=(True,) * 7 + (False,)),
-    Effect("payload", "unmodelled payload at the flange (mass, centre of mass, inertia about it)",
-           PAYLOAD_PARAMS, ("kg", "m", "m", "m") + ("kg m^2",) * 6,
-           np.r_[0.1, 0.0, 0.0, 0.05, np.zeros(6)],
-           np.r_[-3.0, -0.3, -0.3, -0.3, np.full(6, -0.1)],
-           np.r_[5.0, 0.3, 0.3, 0.5, np.full(6, 0.1)],
+    Effect("payload", "unmodelled payload at the flange (mass, centre of mass, extent: the "
+           "Cholesky factor of its second moment of mass, so its inertia is physical)",
+           PAYLOAD_PARAMS, ("kg", "m", "m", "m") + ("m",) * 6,
+           np.r_[0.1, 0.0, 0.0, 0.05, EXTENT_START],
+           np.r_[-3.0, -0.3, -0.3, -0.3, np.where(EXTENT_DIAGONAL, 0.0, -0.3)],
+           np.r_[5.0, 0.3, 0.3, 0.5, np.full(6, 0.3)],
+           physical_lower=(False,) * 4 + tuple(bool(d) for d in EXTENT_DIAGONAL),
            excess_words="the nominal model carries {value} at the flange that the arm does not have"),
     Effect("link_inertia", "link mass/inertia error (relative, per link)",
            tuple(f"link{j}" for j in J), ("1",) * 7, np.zeros(7), np.full(7, -0.9), np.full(7, 2.0)),
@@ -193,7 +208,7 @@ class EffectModels:
             link += self.inertia_link[rows] @ params["link_inertia"]
             drive += self.inertia_drive[rows] @ params["link_inertia"]
         if "payload" in params:
-            phi = standard_parameters(params["payload"])
+            phi = standard_parameters(payload_inertial(params["payload"]))
             link += self.payload_link[rows] @ phi
             drive += self.payload_drive[rows] @ phi
         if "encoder_offset" in params:
@@ -217,7 +232,7 @@ class EffectModels:
         """rows x 7 x 7: the inertia the active effects add to the nominal model (None: none)."""
         added = None
         if "payload" in params:
-            added = self.payload_mass[rows] @ standard_parameters(params["payload"])
+            added = self.payload_mass[rows] @ standard_parameters(payload_inertial(params["payload"]))
         if "link_inertia" in params:
             d = self.link_mass[rows] @ params["link_inertia"]
             added = d if added is None else added + d

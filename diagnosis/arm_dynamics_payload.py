@@ -8,9 +8,18 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from serpar.sim.plants.arm_changes import inertia_from_extent
 from serpar.sim.rigid_arm import FLANGE_BODY, FLANGE_Z, ArmDynamics, rigid_arm_spec
 
 Vec = NDArray[np.float64]
+
+
+def payload_inertial(p: Vec) -> Vec:
+    """The payload candidate's parameters (mass, CoM from the flange, extent: the Cholesky
+    factor of the mass's second moment, :data:`~serpar.sim.plants.arm_changes.EXTENT`) ->
+    (mass, CoM, inertia about the CoM: xx, yy, zz, xy, xz, yz). Fitted in the extent, the
+    inertia is physically consistent for every parameter value."""
+    return np.r_[p[:4], inertia_from_extent(float(p[0]), p[4:10])]
 
 
 def standard_parameters(p: Vec) -> Vec:

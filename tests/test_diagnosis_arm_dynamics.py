@@ -16,11 +16,12 @@ import pytest
 
 from serpar.diagnosis.arm_dynamics_effects import EffectModels
 from serpar.diagnosis.arm_dynamics_family import CHANNELS, family_from_recording
-from serpar.diagnosis.arm_dynamics_payload import payload_model, set_payload
+from serpar.diagnosis.arm_dynamics_payload import payload_inertial, payload_model, set_payload
 from serpar.diagnosis.family import Family
 from serpar.diagnosis.fit import fit_model
 from serpar.diagnosis.select import at_noise_floor, diagnose, earns
 from serpar.errors import ConfigError, IdentificationError
+from serpar.sim.plants.arm_changes import inertia_from_extent, inertia_problem
 from serpar.sim.recording import Recording
 from serpar.twins.arm_dynamics_twin import EFFECTS, OUT_OF_LIBRARY, make_twin
 
@@ -169,14 +170,31 @@ def test_payload_regressor_matches_mujoco_with_the_body() -> None:
     mj_rne of the arm carrying an arbitrary payload body."""
     _, _, fam, _, _, _ = twin(None)
     models: EffectModels = fam._models
-    p = np.array([0.8, 0.02, -0.03, 0.06, 1e-3, 2e-3, 1.5e-3, 2e-4, -1e-4, 3e-4])
+    p = np.array([0.8, 0.02, -0.03, 0.06, 0.03, 0.01, 0.05, -0.02, 0.004, 0.04])  # extent
     dyn, body = payload_model()
-    set_payload(dyn.model, body, p)
+    set_payload(dyn.model, body, payload_inertial(p))
     t = fam.terms
     rows = np.arange(0, fam.n_samples, 7)
     direct = t.rows.at(dyn.link_torque(t.q_full, t.dq_full, t.a_full))[rows]
     _, drive, _, _ = models.contributions({"payload": p}, rows)
     assert np.max(np.abs(drive - direct)) < 1e-9
+
+
+def test_payload_inertia_is_fitted_physical() -> None:
+    """The payload is fitted in its extent, so its inertia is a rigid body's by construction
+    (not checked afterwards): positive definite with the principal moments' triangle
+    inequalities, on any extent, and on the twin's fit the box's inertia is recovered."""
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        extent = rng.uniform(-0.1, 0.1, 6)
+        extent[[0, 2, 5]] = np.abs(extent[[0, 2, 5]]) + 1e-3
+        assert inertia_problem(inertia_from_extent(rng.uniform(0.1, 5.0), extent)) == ""
+    _, answer, _, _, _, _ = twin("payload")
+    p = single_fits("payload")["payload"].params["payload"]
+    inertia = payload_inertial(p)[4:]
+    assert inertia_problem(tuple(inertia)) == ""
+    truth = [answer["params"][n] for n in ("Ixx", "Iyy", "Izz")]
+    np.testing.assert_allclose(inertia[:3], truth, rtol=0.5)
 
 
 def test_twin_answer_stays_out_of_the_recording() -> None:

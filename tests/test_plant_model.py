@@ -18,7 +18,7 @@ from serpar.sim import names
 from serpar.sim.arm import HOME_Q, JOINT_NAMES
 from serpar.sim.config_io import load_yaml_config
 from serpar.sim.model_file import read_model_file
-from serpar.sim.plants.arm_changes import PAYLOAD_BODY
+from serpar.sim.plants.arm_changes import PAYLOAD_BODY, inertia_from_extent
 from serpar.sim.plants.from_model_file import KNOWN_EFFECTS, arm_plant_from_file
 from serpar.sim.scene import Scene, SceneConfig, build_scene
 from serpar.tasks.episode_config import EpisodeConfig, scene_config
@@ -75,6 +75,21 @@ def test_payload_model_adds_its_weight_at_the_flange() -> None:
     link7 = nominal.model.body(names.ARM + "link7").id
     gained = plant.model.body_subtreemass[link7] - nominal.model.body_subtreemass[link7]
     assert gained == pytest.approx(m, abs=1e-12)
+
+
+def test_payload_in_its_extent_is_the_same_body_as_its_inertia(tmp_path) -> None:
+    """A model file may give the payload as diagnose fits it (extent Lxx..Lzz) or as an inertia
+    tensor: the same body either way."""
+    common = {"mass": 0.9, "com_x": 0.01, "com_y": -0.02, "com_z": 0.05}
+    extent = {"Lxx": 0.03, "Lyx": 0.01, "Lyy": 0.02, "Lzx": -0.005, "Lzy": 0.004, "Lzz": 0.04}
+    inertia = dict(zip(("Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz"),
+                       inertia_from_extent(0.9, tuple(extent.values())), strict=True))
+    a = arm_plant_from_file(_model_file(tmp_path, {"payload": {**common, **extent}}, "a"))
+    b = arm_plant_from_file(_model_file(tmp_path, {"payload": {**common, **inertia}}, "b"))
+    assert a.payload == b.payload and a.payload is not None
+    with pytest.raises(ConfigError, match="Lzz missing"):
+        del extent["Lzz"]
+        arm_plant_from_file(_model_file(tmp_path, {"payload": {**common, **extent}}, "c"))
 
 
 def test_friction_model_sets_frictionloss_and_replaces_arm_friction(tmp_path) -> None:

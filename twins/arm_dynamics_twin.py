@@ -129,7 +129,10 @@ def _payload(spec: mujoco.MjSpec, mass: float, rng: np.random.Generator) -> dict
     body.ipos, body.iquat = [0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]  # CoM at the body origin (unset = NaN)
     return {"mass": mass, "com_x": float(com[0]), "com_y": float(com[1]), "com_z": float(com[2]),
             "Ixx": float(body.inertia[0]), "Iyy": float(body.inertia[1]), "Izz": float(body.inertia[2]),
-            "Ixy": 0.0, "Ixz": 0.0, "Iyz": 0.0}
+            "Ixy": 0.0, "Ixz": 0.0, "Iyz": 0.0,
+            # the extent the diagnosis fits: a box's second moment of mass is m diag(half^2 / 3)
+            "Lxx": float(half[0] / np.sqrt(3.0)), "Lyy": float(half[1] / np.sqrt(3.0)),
+            "Lzz": float(half[2] / np.sqrt(3.0)), "Lyx": 0.0, "Lzx": 0.0, "Lzy": 0.0}
 
 
 def _link_inertia(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator) -> dict[str, float]:

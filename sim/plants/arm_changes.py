@@ -70,6 +70,27 @@ class PayloadBody:
             raise ConfigError(f"payload inertia {self.inertia}: {why}")
 
 
+EXTENT = ("Lxx", "Lyx", "Lyy", "Lzx", "Lzy", "Lzz")
+"""A body's extent: the lower-triangular factor L of its mass's second moment about the CoM,
+``integral (r - c)(r - c)^T dm = mass L L^T`` [m]."""
+
+
+def inertia_from_extent(mass: float, extent: tuple[float, ...] | NDArray[np.float64]
+                        ) -> tuple[float, float, float, float, float, float]:
+    """(Ixx, Iyy, Izz, Ixy, Ixz, Iyz) about the CoM of a body of ``mass`` with ``extent``
+    (:data:`EXTENT`). Any extent gives a physically consistent body: a positive semi-definite
+    second moment is exactly that condition (eigenvalues >= 0 and the triangle inequalities of
+    the principal moments; Wensing, Kim & Slotine 2017), so a fit in these parameters is
+    admissible by construction. A negative mass gives the negative of such a body (mass a
+    nominal model carries and the machine lacks)."""
+    lxx, lyx, lyy, lzx, lzy, lzz = (float(v) for v in extent)
+    low = np.array([[lxx, 0.0, 0.0], [lyx, lyy, 0.0], [lzx, lzy, lzz]])
+    second = mass * low @ low.T
+    i = np.trace(second) * np.eye(3) - second
+    return (float(i[0, 0]), float(i[1, 1]), float(i[2, 2]), float(i[0, 1]), float(i[0, 2]),
+            float(i[1, 2]))
+
+
 def inertia_problem(inertia: tuple[float, ...]) -> str:
     """'' when (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) is a rigid body's tensor about its CoM, else why
     not (MuJoCo refuses such a tensor at compile time)."""

@@ -8,7 +8,7 @@ arm_static_effects.py, kinematics/mdh.py):
 |---|---|---|
 | joint_friction | Fc<j> [N m], Fv<j> [N m s/rad] | joint ``frictionloss`` = Fc; ``damping`` = nominal + Fv |
 | link_friction | as joint_friction | added to the same (the cell's sensors then read it as drive friction: noted) |
-| payload | mass, com_x/y/z (from the flange), Ixx..Iyz (about the CoM) | a body on link 7 at the flange |
+| payload | mass, com_x/y/z (from the flange), Ixx..Iyz (about the CoM) or the extent Lxx..Lzz | a body on link 7 at the flange |
 | link_inertia | link<j> (relative) | link j's mass and inertia x (1 + link<j>) |
 | encoder_offset | offset<j> = measured - true [rad] | joint ``ref`` = offset |
 | encoder | o<j> (link = (1 + s) q + o), s<j> | joint ``ref`` = -o; the scale s is not expressible |
@@ -29,7 +29,14 @@ from pathlib import Path
 from serpar.errors import ConfigError
 from serpar.sim.arm import JOINT_NAMES, N_JOINTS, build_arm_spec
 from serpar.sim.model_file import DiagnosisModel, ParamBlock, read_model_file
-from serpar.sim.plants.arm_changes import MDH_PARAMS, ArmPlantChanges, PayloadBody, inertia_problem
+from serpar.sim.plants.arm_changes import (
+    EXTENT,
+    MDH_PARAMS,
+    ArmPlantChanges,
+    PayloadBody,
+    inertia_from_extent,
+    inertia_problem,
+)
 
 J = range(1, N_JOINTS + 1)
 NOT_APPLICABLE: dict[str, str] = {
@@ -54,6 +61,9 @@ NOT_APPLICABLE: dict[str, str] = {
                         "set the episode config's contact_friction to 0.2 + d_mu",
 }
 PAYLOAD = ("mass", "com_x", "com_y", "com_z", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
+"""The payload as an inertia tensor about its CoM (also accepted: the extent, :data:`EXTENT`,
+in place of Ixx..Iyz, as ``serpar diagnose`` fits it)."""
+PAYLOAD_EXTENT = PAYLOAD[:4] + EXTENT
 POINT_MASS_INERTIA = 1e-9
 """[kg m^2] Principal moments given to a payload whose fitted tensor is not physical."""
 
@@ -99,15 +109,17 @@ def _link_friction(block: ParamBlock, d: _Draft) -> None:
 
 
 def _payload(block: ParamBlock, d: _Draft) -> None:
-    p = _names("payload", block, PAYLOAD)
-    missing = [n for n in PAYLOAD if n not in p]
+    form = PAYLOAD_EXTENT if "Lxx" in block.names else PAYLOAD
+    p = _names("payload", block, form)
+    missing = [n for n in form if n not in p]
     if missing:
         raise ConfigError(f"payload: parameter(s) {', '.join(missing)} missing; a body needs all "
-                          f"of {', '.join(PAYLOAD)}")
+                          f"of {', '.join(PAYLOAD)} (or {', '.join(EXTENT)} for Ixx..Iyz)")
     if p["mass"] <= 0:
         d.notes.append(f"payload: fitted mass {p['mass']:.3g} kg <= 0, no body has it: not applied")
         return
-    inertia = tuple(p[n] for n in PAYLOAD[4:])
+    inertia = (inertia_from_extent(p["mass"], tuple(p[n] for n in EXTENT)) if form is PAYLOAD_EXTENT
+               else tuple(p[n] for n in PAYLOAD[4:]))
     why = inertia_problem(inertia)
     if why:
         d.notes.append(f"payload inertia not physical ({why}): applied as a point mass")
