@@ -1,6 +1,7 @@
 """Orchestrators of ``serpar calibrate arm``: the simulated campaign of seed 003 (150
 training + 100 verification poses on the MuJoCo plant of :mod:`serpar.sim.plants.static_panda`) and the
-leave-one-placement-out evaluation of a panda_1-layout point-consistency folder.
+leave-one-placement-out evaluation of a panda_1-layout point-consistency folder (two
+placements or more: with two, each is calibrated on alone and scored on the other).
 
 Both run the same pipeline (:func:`serpar.calibration.arm_calibration.calibrate`) with the same
 regularisation prior, for the geometric and the gravity-aware model, in either form of the
@@ -28,7 +29,7 @@ from serpar.calibration.arm_calibration import (
 )
 from serpar.calibration.arm_error_models import FORMS, ArmModel, Prior, chain_forward
 from serpar.calibration.arm_identifiability import IdentifiabilityReport
-from serpar.calibration.panda_data import load_panda_folder
+from serpar.calibration.panda_data import PandaPointData, load_panda_folder
 from serpar.calibration.poe_calibration import PoeChain, panda_poe_chain
 from serpar.errors import IdentificationError, UnknownNameError
 from serpar.kinematics.mdh import Chain, panda_chain
@@ -42,6 +43,11 @@ PAPER_MEAN_REDUCTION = {"x": 0.20, "y": 0.17}
 REAL_GRAVITY_PLANT = TruthConfig(tool_mass_kg=0.0, hand=False, tool_offset_m=(0.0, 0.0, 0.0))
 """Gravity model for the real Panda: the bare arm (the ball is fixed to the flange; its mass
 is unknown and taken as zero), nominal geometry."""
+MIN_PLACEMENTS = 2
+"""Tool placements a real-data calibration needs: one to calibrate on and one held out. One
+placement (two sockets, one fixture distance) identifies the same chain parameters as two:
+on panda_1 25 of them either way (condition 376-1080 alone vs 414-676 for two), so training
+on a single placement is well posed, only less well averaged."""
 
 
 def check_models(models: tuple[str, ...]) -> tuple[str, ...]:
@@ -138,19 +144,22 @@ class FoldRow:
     compliance_test: ComplianceTest | None = None
 
 
-def real_data_calibration(folder: str, models: tuple[str, ...] = MODELS,
+def real_data_calibration(folder: str | PandaPointData, models: tuple[str, ...] = MODELS,
                           progress: Callable[[int], object] | None = None, form: str = "mdh"
                           ) -> tuple[FoldRow, ...]:
-    """Per tool placement: calibrate on the other placements, score the held-out one. The
-    "nominal" row is the Panda's nominal table with only the ball offset fitted.
-    ``progress(1)`` is called after each held-out placement; ``form``: of the error model."""
+    """Per tool placement: calibrate on the other placements (one or more), score the held-out
+    one. ``folder``: a panda_1-layout folder, or its data already loaded (whose notes the
+    caller reports). The "nominal" row is the Panda's nominal table with only the ball offset
+    fitted. ``progress(1)`` is called after each held-out placement; ``form``: of the error
+    model."""
     check_models(models)
     chain = form_chain(form)
-    data = load_panda_folder(folder)
-    if len(data.placements) < 3:
-        raise IdentificationError(f"{folder}: {len(data.placements)} tool placement folder(s) "
-                                  f"({', '.join(data.placements)}); training on two and testing "
-                                  "on a third needs at least 3")
+    data = folder if isinstance(folder, PandaPointData) else load_panda_folder(folder)
+    if len(data.placements) < MIN_PLACEMENTS:
+        raise IdentificationError(f"{data.folder}: {len(data.placements)} tool placement "
+                                  f"folder(s) ({', '.join(data.placements)}); calibrating on "
+                                  "one placement and testing on another held out needs at "
+                                  f"least {MIN_PLACEMENTS}")
     plant = nominal_plant(REAL_GRAVITY_PLANT)
     rows = []
     for test in data.placements:
@@ -168,6 +177,14 @@ def real_data_calibration(folder: str, models: tuple[str, ...] = MODELS,
         if progress is not None:
             progress(1)
     return tuple(rows)
+
+
+def fold_scheme(n_placements: int) -> str:
+    """How :func:`real_data_calibration` splits ``n_placements`` placements, in words."""
+    if n_placements == MIN_PLACEMENTS:
+        return "train on one tool placement, test on the other, each in turn"
+    return (f"train on {n_placements - 1} tool placements, test on the remaining one, each "
+            "in turn")
 
 
 def _ball(chain: Chain | PoeChain, cal: ArmCalibration) -> NDArray[np.float64]:

@@ -24,7 +24,7 @@ import numpy as np
 import pyarrow as pa
 from numpy.typing import NDArray
 
-from serpar.calibration.panda_data import SOCKET_DISTANCE_M, load_panda_folder
+from serpar.calibration.panda_data import SOCKET_DISTANCE_M, PandaPointData, load_panda_folder
 from serpar.errors import IdentificationError
 from serpar.sim.arm import N_JOINTS
 from serpar.sim.arm_measurements import PointSet, PositionSet
@@ -156,10 +156,10 @@ def to_recording(data: StaticArmData, source: str, notes: dict[str, object] | No
     return Recording(meta, pa.table({"time": pa.array(np.zeros(0))}), pa.table(cols))
 
 
-def panda_folder_data(folder: str, sigma_m: float = 50e-6) -> StaticArmData:
-    """A panda_1-layout folder (serpar.calibration.panda_data) as point data with a placement column."""
-
-    raw = load_panda_folder(folder)
+def panda_folder_data(folder: str | PandaPointData, sigma_m: float = 50e-6) -> StaticArmData:
+    """A panda_1-layout folder (serpar.calibration.panda_data), or its data already loaded
+    (whose notes the caller reports), as point data with a placement column."""
+    raw = folder if isinstance(folder, PandaPointData) else load_panda_folder(folder)
     q, sock, place, dist = [], [], [], []
     for k, name in enumerate(raw.placements):
         for s, rows in enumerate(raw.q[k]):

@@ -5,9 +5,12 @@ Layout: one folder per placement of the two-socket calibration tool
 ``hole_1.csv``: one arm configuration per row, seven joint angles in radians (joint 1
 first), no header. The sockets' centres are :data:`SOCKET_DISTANCE_M` apart.
 
-Every row and every folder is used or the load fails with what is wrong: a folder without
-both socket files, a stray file, a row that is not seven finite numbers, a socket with too
-few rows. Nothing is dropped.
+Every row of every socket file is used or the load fails with what is wrong: a placement
+folder with one socket file but not the other, a row that is not seven finite numbers, a
+socket with too few rows, no placement folder at all. What published folders carry besides
+(``hole_0_pose.csv``, ``comments.txt``, a ``photos/`` folder without socket files) is not
+read, and each such file or folder is named in :attr:`PandaPointData.notes`, so nothing is
+dropped unsaid.
 """
 
 from __future__ import annotations
@@ -28,6 +31,8 @@ SOCKET_DISTANCE_M = 0.050
 MIN_ROWS = 3
 """Fewer configurations than this cannot show a socket's spread."""
 IGNORED_FILES = ("LICENSE", "README.md")
+"""Top-level files a published folder is expected to carry: skipped without a note."""
+READ_FOR = f"a placement folder is read for {' and '.join(SOCKET_FILES)}"
 
 
 @dataclass(frozen=True)
@@ -37,6 +42,8 @@ class PandaPointData:
     folder: str
     placements: tuple[str, ...]
     q: tuple[tuple[NDArray[np.float64], ...], ...]
+    notes: tuple[str, ...] = ()
+    """One line per file or folder of the data folder that was not read, and why."""
 
     def point_set(self, placements: tuple[str, ...], sigma: float = 50e-6,
                   tau_gravity: NDArray[np.float64] | None = None) -> PointSet:
@@ -62,32 +69,49 @@ class PandaPointData:
 
 
 def load_panda_folder(folder: str | Path) -> PandaPointData:
-    """Read a panda_1-layout folder; IdentificationError names what is missing or wrong."""
+    """Read a panda_1-layout folder; IdentificationError names what is missing or wrong.
+    Files and folders that are not socket files are skipped and named in ``notes``."""
     root = Path(folder)
     if not root.is_dir():
         raise IdentificationError(f"data folder {str(root)!r} does not exist")
-    entries = sorted(p for p in root.iterdir() if not p.name.startswith("."))
-    stray = [p.name for p in entries if p.is_file() and p.name not in IGNORED_FILES]
-    if stray:
-        raise IdentificationError(f"{root}: unexpected file(s) {stray}; expected one folder "
-                                  f"per tool placement holding {' and '.join(SOCKET_FILES)}")
-    dirs = [p for p in entries if p.is_dir()]
-    if not dirs:
-        raise IdentificationError(f"{root}: no tool-placement folders; expected e.g. "
-                                  f"front/{SOCKET_FILES[0]} and front/{SOCKET_FILES[1]}")
-    q = []
-    for d in dirs:
-        names = sorted(p.name for p in d.iterdir() if not p.name.startswith("."))
+    entries = _visible(root)
+    notes = [_ignored(root, p, "not a socket file") for p in entries
+             if p.is_file() and p.name not in IGNORED_FILES]
+    placements, q = [], []
+    for d in (p for p in entries if p.is_dir()):
+        names = {p.name for p in _visible(d) if p.is_file()}
+        if not names & set(SOCKET_FILES):
+            # photos/, scans/...: a folder of the publication, not a tool placement
+            notes.append(_ignored(root, d, "no socket file in it"))
+            continue
         missing = [f for f in SOCKET_FILES if f not in names]
-        extra = [f for f in names if f not in SOCKET_FILES]
-        if missing or extra:
-            what = (f"missing {', '.join(missing)}" if missing else "") + \
-                   ("; " if missing and extra else "") + \
-                   (f"unexpected {', '.join(extra)}" if extra else "")
-            raise IdentificationError(f"{d}: {what} (a placement folder holds exactly "
-                                      f"{' and '.join(SOCKET_FILES)})")
+        if missing:
+            raise IdentificationError(f"{d}: missing {', '.join(missing)} (a placement folder "
+                                      f"holds {' and '.join(SOCKET_FILES)})")
+        notes.extend(_ignored(root, p, "not a socket file") for p in _visible(d)
+                     if p.name not in SOCKET_FILES or not p.is_file())
+        placements.append(d.name)
         q.append(tuple(_read_csv(d / f) for f in SOCKET_FILES))
-    return PandaPointData(str(root), tuple(d.name for d in dirs), tuple(q))
+    if not placements:
+        seen = [_rel(root, p) for p in entries if p.name not in IGNORED_FILES]
+        skipped = f" (ignored: {', '.join(seen)})" if seen else ""
+        raise IdentificationError(f"{root}: no tool-placement folders{skipped}; expected e.g. "
+                                  f"front/{SOCKET_FILES[0]} and front/{SOCKET_FILES[1]}")
+    return PandaPointData(str(root), tuple(placements), tuple(q), tuple(notes))
+
+
+def _visible(folder: Path) -> list[Path]:
+    """A folder's entries in name order; hidden ones (.DS_Store, .git) are not the data's."""
+    return sorted(p for p in folder.iterdir() if not p.name.startswith("."))
+
+
+def _rel(root: Path, path: Path) -> str:
+    """``path`` as the user sees it inside the data folder; a folder ends in ``/``."""
+    return path.relative_to(root).as_posix() + ("/" if path.is_dir() else "")
+
+
+def _ignored(root: Path, path: Path, why: str) -> str:
+    return f"ignored {_rel(root, path)}: {why} ({READ_FOR})"
 
 
 def _read_csv(path: Path) -> NDArray[np.float64]:

@@ -11,9 +11,11 @@ from typing import TYPE_CHECKING
 from serpar.calibration.arm_campaign import (
     PAPER_MEAN_REDUCTION,
     fold_dict,
+    fold_scheme,
     real_data_calibration,
     simulated_calibration,
 )
+from serpar.calibration.panda_data import load_panda_folder
 from serpar.calibration.poe_calibration import GAUGE
 from serpar.cli.output import print_json, progress, table
 from serpar.errors import ConfigError
@@ -42,8 +44,9 @@ def register_arm(calibrate_sub: argparse._SubParsersAction) -> argparse.Argument
                         "(product of exponentials with per-joint twist errors, seed 001), or "
                         "both side by side on the same measurements")
     p.add_argument("--data", metavar="DIR",
-                   help="a panda_1-layout folder (<placement>/hole_0.csv, hole_1.csv): train on "
-                        "two placements, test on the third, each in turn")
+                   help="a panda_1-layout folder (<placement>/hole_0.csv, hole_1.csv; two "
+                        "placements or more, other files are skipped with a note): train on "
+                        "the other placements, test on one, each in turn")
     p.add_argument("--seed", type=int, default=3,
                    help="hidden errors, poses and tracker noise of the simulated arm (default 3)")
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -155,21 +158,22 @@ def _print_report(label: str, cal: ArmCalibration, test: ComplianceTest | None) 
 
 def _real(folder: str, models: tuple[str, ...], as_json: bool,
           forms: tuple[str, ...] = ("mdh",)) -> int:
-    from pathlib import Path
-
-
-    n_folds = sum(1 for p in Path(folder).iterdir() if p.is_dir() and not p.name.startswith("."))
+    data = load_panda_folder(folder)  # once: its notes are printed, every form reuses it
+    n_folds = len(data.placements)
     with progress(n_folds * len(forms), "calibrate arm", enabled=sys.stderr.isatty()) as bar:
-        by_form = {f: real_data_calibration(folder, models, bar.update, f) for f in forms}
+        by_form = {f: real_data_calibration(data, models, bar.update, f) for f in forms}
     # fold by fold; the "nominal" row (ball offset only) is the same model in both forms
     rows = [r for test in dict.fromkeys(r.test for r in by_form[forms[0]])
             for f in forms for r in by_form[f]
             if r.test == test and (r.label != "nominal" or f == forms[0])]
     if as_json:
-        print_json({"folder": folder, "folds": [fold_dict(r) for r in rows]})
+        print_json({"folder": folder, "scheme": fold_scheme(n_folds), "notes": list(data.notes),
+                    "folds": [fold_dict(r) for r in rows]})
         return 0
-    print(f"Point-consistency data {folder}: train on two tool placements, test on the third; "
+    print(f"Point-consistency data {folder}: {fold_scheme(n_folds)}; "
           "'nominal' = the Panda's nominal table with only the ball offset fitted")
+    for note in data.notes:
+        print(f"note: {note}")
     names = {"nominal": "nominal", "geometric": "geometry-only", "gravity": "gravity-aware"}
 
     def label(r: FoldRow) -> str:

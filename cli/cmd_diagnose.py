@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 
 from serpar.cli.output import print_json, progress, table
-from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis
+from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis, load_notes
 from serpar.diagnosis.config_model import is_config_path, model_from_episode_config
 from serpar.diagnosis.prior import PriorFamily
 from serpar.diagnosis.report_html import write_report
@@ -77,6 +77,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     rec = load_for_diagnosis(args.recording)
     family = family_from_recording(rec)
+    notes = load_notes(rec) + list(getattr(family, "notes", ()))  # the data's, then the family's
     prior = None
     if args.model:
 
@@ -105,8 +106,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         if prior is not None:
             out["prior_model"], out["fixed_effects"] = args.model, list(prior.fixed)
         out["plant"] = plant
+        out["notes"] = notes
         print_json(out)
     else:
+        for note in notes:
+            print(f"note: {note}")
         if prior is not None:
             print(f"against {args.model}: {', '.join(prior.fixed) or 'no effects'} fixed at its "
                   "values (a finding on one of them is a correction)")

@@ -15,7 +15,7 @@ from serpar.cli import (
     cmd_control_check,
     cmd_diagnose,
     cmd_error_analysis,
-    cmd_import_csv,
+    cmd_import,
     cmd_replay,
     cmd_run,
     cmd_twin,
@@ -122,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "assembly cell (Panda arm, 6-UPS Stewart platform, H7/h6 journal insertion, stereo vision). "
                      "Start with `serpar run --holes 3`.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser,
-                                metavar="{info,render,validate,control-check,workspace,vision-check,bench,run,ablate,replay,calibrate,error-analysis,diagnose,twin,blind-bench,import-csv}")
+                                metavar="{info,render,validate,control-check,workspace,vision-check,bench,run,ablate,replay,calibrate,error-analysis,diagnose,twin,blind-bench,import}")
 
     def scene_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--seed", type=int, help="seed of the tolerance draws (integer; default 0)")
@@ -167,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmd_diagnose.register(sub)
     cmd_twin.register(sub)
     cmd_blind_bench.register(sub)
-    cmd_import_csv.register(sub)
+    cmd_import.register(sub)
     return parser
 
 

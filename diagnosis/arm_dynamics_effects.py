@@ -60,6 +60,9 @@ SCALE_BOUND = 0.05
 """Largest relative encoder scale error: a wrong gear ratio or resolution setting."""
 
 
+COMMAND_ONLY = ("joint_friction", "stribeck_friction", "latency")
+"""Effects only the drive channel shows (friction inside the drive, before the torque sensor;
+a delayed command): without a commanded torque in the recording they are not candidates."""
 PAYLOAD_PARAMS = ("mass", "com_x", "com_y", "com_z") + EXTENT
 EXTENT_DIAGONAL = np.array([n[1] == n[2] for n in EXTENT])
 EXTENT_START = np.where(EXTENT_DIAGONAL, 0.03, 0.0)

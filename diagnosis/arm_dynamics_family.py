@@ -17,7 +17,7 @@ from itertools import pairwise
 import numpy as np
 from numpy.typing import NDArray
 
-from serpar.diagnosis.arm_dynamics_effects import BASELINE, EFFECTS, EffectModels
+from serpar.diagnosis.arm_dynamics_effects import BASELINE, COMMAND_ONLY, EFFECTS, EffectModels
 from serpar.diagnosis.arm_dynamics_empirical import arm_library
 from serpar.diagnosis.arm_dynamics_signals import SmoothingConfig, read_arm_series
 from serpar.diagnosis.arm_dynamics_terms import Terms, compute_terms, row_sigma
@@ -36,7 +36,7 @@ KIND = "arm_dynamics"
 BLOCK_S = 2.0
 """Length of the alternating training / held-out time blocks [s]."""
 CHANNELS: tuple[str, ...] = ch.TAU_J + ch.TAU_J_D
-"""Residual columns of one row, in order."""
+"""Residual columns of one row, in order (a recording without tau_J_d: tau_J alone)."""
 TOP_SHARE = 0.25
 """A row is in a joint's "high gravity load" / "high acceleration" regime when it is in the
 top quarter of that joint's |g| / |q̈| over the recording."""
@@ -80,7 +80,13 @@ class ArmDynamicsFamily:
         self._knots: Vec | None = None
         if cfg.tare_knot_s is not None:
             self.pin_tare_knots(np.arange(len(terms.time)))
-        self.effects: tuple[Effect, ...] = EFFECTS
+        self.channels = CHANNELS if terms.has_command else ch.TAU_J
+        self.effects: tuple[Effect, ...] = (EFFECTS if terms.has_command else
+                                            tuple(e for e in EFFECTS if e.name not in COMMAND_ONLY))
+        self.notes: tuple[str, ...] = () if terms.has_command else (
+            ("no commanded torque (tau_J_d) in the recording: only the torque sensors' channel "
+             f"is compared, and {', '.join(COMMAND_ONLY)} (which only the command shows: "
+             "friction inside the drive acts before the torque sensor) are not candidates"),)
         self.n_samples = len(terms.time)
         self._models = EffectModels(terms, dynamics)
         self._phases = phases
@@ -104,17 +110,20 @@ class ArmDynamicsFamily:
         else:
             sigma_link, sigma_drive = row_sigma(t.measurement_var, t.acc_var,
                                                 t.mass_link[rows] + added, t.mass_full[rows] + added)
+        if not t.has_command:
+            return (link / sigma_link).ravel()
         return np.hstack([link / sigma_link, drive / sigma_drive]).ravel()
 
     def noise_ratio(self, rows: NDArray[np.int64], whitened: Vec) -> tuple[float, str] | None:
         """The data's noise over the stated sigma, from sample-to-sample differences (white
         sensor noise survives them, the slow residual of missing physics cancels)."""
-        r = consecutive_noise_ratio(rows, whitened, len(CHANNELS))
+        r = consecutive_noise_ratio(rows, whitened, len(self.channels))
         return None if r is None else (r, "sample-to-sample differences")
 
     def empirical_library(self) -> list[BasisGroup]:
         """Shapes in each joint's angle, velocity and time (diagnosis/arm_dynamics_empirical.py)."""
-        return arm_library(self.terms)
+        groups = arm_library(self.terms)
+        return groups if self.terms.has_command else [g for g in groups if g.channel in ch.TAU_J]
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         block = np.floor((self.terms.time - self.terms.time[0]) / self.cfg.block_s).astype(int)
@@ -128,9 +137,9 @@ class ArmDynamicsFamily:
 
     def locate(self, rows: NDArray[np.int64], whitened: Vec) -> list[LocateRow]:
         rows = np.asarray(rows, np.int64)
-        w = np.asarray(whitened, float).reshape(len(rows), len(CHANNELS))
+        w = np.asarray(whitened, float).reshape(len(rows), len(self.channels))
         groups = []
-        for c, channel in enumerate(CHANNELS):
+        for c, channel in enumerate(self.channels):
             j = c % 7
             groups.append((channel, "all", "all rows", w[:, c]))
             for (group, label), mask in self._regimes.items():
@@ -210,8 +219,9 @@ def drifting_tare(time: Vec, pinned_by: Vec, spacing_s: float) -> tuple[Vec, Eff
 def check_scale(terms: Terms) -> None:
     """IdentificationError when a torque channel does not scale like the nominal model: units
     other than N m, or a recording of another robot."""
-    for name, measured, model in (("tau_J", terms.link + terms.tau_link_model, terms.tau_link_model),
-                                  ("tau_J_d", terms.drive + terms.tau_full_model, terms.tau_full_model)):
+    channels = (("tau_J", terms.link + terms.tau_link_model, terms.tau_link_model),
+                ("tau_J_d", terms.drive + terms.tau_full_model, terms.tau_full_model))
+    for name, measured, model in channels[:2 if terms.has_command else 1]:
         x = model - model.mean(axis=0)
         y = measured - measured.mean(axis=0)
         for j in np.flatnonzero(np.sqrt(np.mean(x**2, axis=0)) > SCALE_MIN_RMS):

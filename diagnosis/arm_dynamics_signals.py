@@ -33,8 +33,9 @@ from serpar.sim.recording import Recording
 
 Vec = NDArray[np.float64]
 
-REQUIRED = ch.Q + ch.TAU_J + ch.TAU_J_D
-"""Channels the diagnosis reads (dq is optional: velocities come from the encoders)."""
+REQUIRED = ch.Q + ch.TAU_J
+"""Channels the diagnosis needs (dq is optional: velocities come from the encoders; tau_J_d,
+the command, is optional: without it only what the torque sensors show is diagnosed)."""
 RATE_TOLERANCE = 0.01
 """Largest relative deviation of a sampling interval from 1/sample_rate_hz."""
 Q_MARGIN = 0.2
@@ -67,7 +68,8 @@ class ArmSeries:
     rate: float
     q: Vec
     tau_J: Vec
-    tau_J_d: Vec
+    tau_J_d: Vec | None
+    """None: the recording has no commanded torque (a log of measured torque only)."""
     sigma_q: Vec
     sigma_tau: Vec
     sigma_cmd: Vec
@@ -110,7 +112,7 @@ def read_arm_series(rec: Recording) -> ArmSeries:
     missing = [c for c in ("time",) + REQUIRED if c not in cols]
     if missing:
         raise IdentificationError(f"the arm-dynamics diagnosis needs channels {', '.join(missing)}"
-                                  " (libfranka q, tau_J, tau_J_d of 7 joints), not in the recording")
+                                  " (libfranka q and tau_J of 7 joints), not in the recording")
     t = _column(rec, "time")
     if t.size < 3 or np.any(np.diff(t) <= 0):
         bad = int(np.argmax(np.diff(t) <= 0)) + 1 if t.size >= 2 else 0
@@ -120,7 +122,8 @@ def read_arm_series(rec: Recording) -> ArmSeries:
     if np.max(np.abs(dt * rate - 1.0)) > RATE_TOLERANCE:
         worst = int(np.argmax(np.abs(dt * rate - 1.0)))
         raise IdentificationError(f"samples are not uniform at {rate:g} Hz (interval {dt[worst]:.6g} s "
-                                  f"at row {worst + 1}); resample before diagnosing")
+                                  f"at row {worst + 1}); put them on the grid with `serpar import "
+                                  f"FILE --rate {rate:g}` (jitter and missed ticks repaired, counted)")
     q = np.column_stack([_column(rec, c) for c in ch.Q])
     lo, hi = np.asarray(Q_MIN) - Q_MARGIN, np.asarray(Q_MAX) + Q_MARGIN
     outside = np.flatnonzero(np.any((q < lo) | (q > hi), axis=0))
@@ -129,7 +132,12 @@ def read_arm_series(rec: Recording) -> ArmSeries:
         raise IdentificationError(f"q{j + 1} reaches {q[:, j].min():.3g}..{q[:, j].max():.3g}, outside the "
                                   f"Panda's range {Q_MIN[j]}..{Q_MAX[j]} rad: degrees, or another robot?")
     tau = np.column_stack([_column(rec, c) for c in ch.TAU_J])
-    cmd = np.column_stack([_column(rec, c) for c in ch.TAU_J_D])
+    present = [c for c in ch.TAU_J_D if c in cols]
+    if present and len(present) < len(ch.TAU_J_D):
+        missing = [c for c in ch.TAU_J_D if c not in cols]
+        raise IdentificationError(f"the command has {', '.join(present)} but not "
+                                  f"{', '.join(missing)}: give tau_J_d of all 7 joints or none")
+    cmd = np.column_stack([_column(rec, c) for c in ch.TAU_J_D]) if present else None
     sigma_tau = _sigmas(rec, ch.TAU_J, None)
     return ArmSeries(t, rate, q, tau, cmd, _sigmas(rec, ch.Q, None), sigma_tau,
                      _sigmas(rec, ch.TAU_J_D, sigma_tau))

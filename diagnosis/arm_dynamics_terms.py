@@ -86,6 +86,8 @@ class Terms:
     """The windowed command mean as a cubic spline over (fractional) sample index: the
     latency effect reads it a delay earlier."""
     rate: float
+    has_command: bool = True
+    """False: the recording has no tau_J_d; only the link channel (tau_J) is compared."""
 
 
 def compute_terms(series: ArmSeries, cfg: SmoothingConfig | None = None,
@@ -97,9 +99,12 @@ def compute_terms(series: ArmSeries, cfg: SmoothingConfig | None = None,
     v, a = full_rate_derivatives(series.q, series.rate)
     model = dyn.series(series.q, v, a)  # every sample: the model is linear in the raw q̈
     link = rows.at(series.tau_J) - rows.link_at(model.link)
-    cmd_mean = np.empty_like(series.tau_J_d)  # continuous mean of the held command at t_k
-    cmd_mean[1:] = 0.5 * (series.tau_J_d[1:] + series.tau_J_d[:-1])
-    cmd_mean[0] = series.tau_J_d[0]
+    if series.tau_J_d is None:  # no command: a drive channel of zeros that nothing reads
+        cmd_mean = model.full
+    else:
+        cmd_mean = np.empty_like(series.tau_J_d)  # continuous mean of the held command at t_k
+        cmd_mean[1:] = 0.5 * (series.tau_J_d[1:] + series.tau_J_d[:-1])
+        cmd_mean[0] = series.tau_J_d[0]
     drive = rows.at(cmd_mean - model.full)
     q_r, dq_r, ddq_r = rows.at(series.q), rows.at(v), rows.at(a)
     m_link, m_full = dyn.mass_link_and_full(q_r)
@@ -117,7 +122,7 @@ def compute_terms(series: ArmSeries, cfg: SmoothingConfig | None = None,
                  ddq_link=rows.link_at(a), a_full=a,
                  q_full=series.q, tau_link_model=rows.link_at(model.link),
                  tau_full_model=rows.at(model.full), gravity=dyn.gravity(q_r), dq_full=v,
-                 command=spline, rate=series.rate)
+                 command=spline, rate=series.rate, has_command=series.tau_J_d is not None)
 
 
 def row_sigma(measurement_var: Vec, acc_var: Vec, mass_link: Vec, mass_full: Vec

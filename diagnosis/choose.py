@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from serpar.calibration.arm_static_data import panda_folder_data, static_data, to_recording
+from serpar.calibration.panda_data import SOCKET_FILES, load_panda_folder
 from serpar.diagnosis.arm_dynamics_family import family_from_recording as dynamics_family
 from serpar.diagnosis.arm_static_family import family_from_data
 from serpar.diagnosis.episode_family import family_from_recording as episode_family
@@ -26,11 +27,16 @@ WHAT = ("a measurements table (q1..q7 with x/y/z or socket: a static calibration
         "--record), or Stewart signals leg_cmd1..6, leg1..6, "
         "platform_x/y/z/qw/qx/qy/qz (rest holds of the platform, or the platform moving "
         "continuously), or a panda_1-layout folder")
+NOTES = "notes"
+"""Key of ``meta.model`` listing, one line each, what the import of the data did not read."""
 
 
 def is_panda_folder(path: Path) -> bool:
+    """Any sub-folder with a socket file: one with only one of them is then refused by the
+    loader naming the missing file, not as "not a recording"."""
     return (path.is_dir() and not (path / "meta.json").exists()
-            and any((d / "hole_0.csv").is_file() for d in path.iterdir() if d.is_dir()))
+            and any((d / f).is_file() for d in path.iterdir() if d.is_dir()
+                    for f in SOCKET_FILES))
 
 
 def load_for_diagnosis(path: str | Path) -> Recording:
@@ -40,10 +46,17 @@ def load_for_diagnosis(path: str | Path) -> Recording:
         raise IdentificationError(f"{src} does not exist; expected a recording folder "
                                   "(meta.json + tables) or a panda_1-layout folder")
     if is_panda_folder(src):
-
-        return to_recording(panda_folder_data(str(src)), "real",
-                            {"imported_from": f"panda_1 layout: {src}"})
+        raw = load_panda_folder(src)
+        return to_recording(panda_folder_data(raw), "real",
+                            {"imported_from": f"panda_1 layout: {src}", NOTES: list(raw.notes)})
     return read_recording(src)
+
+
+def load_notes(rec: Recording) -> list[str]:
+    """What loading the recording skipped (files of a panda_1-layout folder that are not
+    socket files), one line each, for the user to see; empty for a recording as written."""
+    notes = rec.meta.model.get(NOTES, []) if isinstance(rec.meta.model, dict) else []
+    return [str(n) for n in notes] if isinstance(notes, list) else []
 
 
 def family_from_recording(rec: Recording) -> Family:

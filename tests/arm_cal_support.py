@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -19,6 +21,11 @@ from serpar.sim.arm import Q_MAX, Q_MIN
 from serpar.sim.arm_measurements import PointSet, PositionSet
 
 TOOL = (0.01, 0.05, 0.12)
+REAL = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "panda_1"
+PUBLISHED_EXTRAS = ("comments.txt", "back-high/hole_0_pose.csv", "front/comments.txt",
+                    "front/README.md", "photos/")
+"""What a published copy of panda_1 carries besides the socket files (the loader's notes name
+each; a folder ends in /)."""
 LO, HI = np.asarray(Q_MIN) + 0.1, np.asarray(Q_MAX) - 0.1
 
 
@@ -99,3 +106,20 @@ def assert_recovered_exactly(model: ArmModel, meas, x: np.ndarray) -> None:
     k = 3 * cal.layout.n_points                            # socket centres first, then errors
     assert np.linalg.norm(cal.x[k:] - x[k:]) <= 1e-9 * np.linalg.norm(x[k:])
     assert np.linalg.norm(cal.x[:k] - x[:k]) <= 1e-9 * max(np.linalg.norm(x[:k]), 1.0)
+
+
+def published_copy(dest: Path, drop: tuple[str, ...] = ()) -> tuple[Path, tuple[str, ...]]:
+    """panda_1 (read-only, so copied) as a publication would carry it: PUBLISHED_EXTRAS added,
+    the placements in ``drop`` removed. Returns the copy's folder and the extras it holds."""
+    root = dest / "panda_1"
+    shutil.copytree(REAL, root, ignore=shutil.ignore_patterns(*drop))
+    for path in (root, *root.rglob("*")):
+        path.chmod(0o755 if path.is_dir() else 0o644)
+    extras = tuple(e for e in PUBLISHED_EXTRAS if e.split("/")[0] not in drop)
+    for extra in extras:
+        if extra.endswith("/"):
+            (root / extra).mkdir()
+            (root / extra / "socket_front.jpg").write_bytes(b"\xff\xd8")
+        else:
+            (root / extra).write_text("0.1,0.2,0.3\n" if extra.endswith(".csv") else "notes\n")
+    return root, extras

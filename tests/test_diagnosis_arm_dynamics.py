@@ -21,6 +21,7 @@ from serpar.diagnosis.family import Family
 from serpar.diagnosis.fit import fit_model
 from serpar.diagnosis.select import at_noise_floor, diagnose, earns
 from serpar.errors import ConfigError, IdentificationError
+from serpar.sim import channels as ch
 from serpar.sim.plants.arm_changes import inertia_from_extent, inertia_problem
 from serpar.sim.recording import Recording
 from serpar.twins.arm_dynamics_twin import EFFECTS, OUT_OF_LIBRARY, make_twin
@@ -235,12 +236,13 @@ def _set(name: str, fn):
 
 @pytest.mark.parametrize("change,message", [
     ("drop tau_J3", r"needs channels tau_J3 \(libfranka"),
+    ("drop tau_J_d5", r"the command has tau_J_d1, .* but not tau_J_d5: give tau_J_d of all 7"),
     (_set("q4", lambda x: np.r_[x[:-10], [None] * 10]), r"channel q4 has 10 missing sample\(s\)"),
     (_set("tau_J_d2", lambda x: np.where(np.arange(len(x)) == 500, np.nan, x)),
      r"channel tau_J_d2 has 1 non-finite sample\(s\) \(NaN/inf\), first at row 500"),
     (_set("time", lambda x: np.r_[x[:300], x[299], x[301:]]), r"time must increase strictly \(row 300"),
     (_set("time", lambda x: x * np.where(np.arange(len(x)) > 1000, 1.5, 1.0)),
-     r"samples are not uniform at 1000 Hz"),
+     r"samples are not uniform at 1000 Hz .*`serpar import FILE --rate 1000`"),
     (_set("q2", lambda x: np.degrees(x)), r"q2 reaches .* outside the Panda's range .* degrees"),
     (_set("tau_J4", lambda x: 1000.0 * x), r"tau_J4 varies 1e\+03 times as much as the nominal"),
     (_set("tau_J_d2", lambda x: -x), r"tau_J_d2 varies -1 times as much .* another robot"),
@@ -249,6 +251,29 @@ def test_bad_input_is_one_line_naming_the_problem(change, message: str) -> None:
     with pytest.raises(IdentificationError, match=message) as err:
         family_from_recording(_edited(change))
     assert "\n" not in str(err.value)
+
+
+def _measured_torque_only(effect: str) -> Recording:
+    rec = twin(effect)[0]
+    keep = [c for c in rec.signals.column_names if not c.startswith("tau_J_d")]
+    sigma = {k: v for k, v in rec.meta.noise_sigma.items() if k in keep}
+    return Recording(dataclasses.replace(rec.meta, channels=tuple(keep), noise_sigma=sigma),
+                     rec.signals.select(keep))
+
+
+def test_a_log_of_measured_torque_only_is_diagnosed() -> None:
+    """No tau_J_d (a published log of q and tau_J): the torque sensors' channel alone. A
+    payload shows there and is found; friction inside the drive acts before the torque sensor,
+    so a joint-friction twin's log shows nothing beyond noise, and the notes say why."""
+    fam = family_from_recording(_measured_torque_only("payload"))
+    assert fam.channels == ch.TAU_J and "joint_friction" not in {e.name for e in fam.effects}
+    d = diagnose(fam, seed=SEED)
+    assert [f.effect for f in d.established] == ["payload"] and d.heldout_rms_after <= 1.5
+    mass = next(p for p in d.findings[0].params if p.name == "mass")
+    assert abs(mass.value - twin("payload")[1]["params"]["mass"]) < 3 * mass.std + 1e-3
+    fam = family_from_recording(_measured_torque_only("joint_friction"))
+    d = diagnose(fam, seed=SEED)
+    assert d.established == () and "not candidates" in fam.notes[0]
 
 
 def test_too_short_a_recording_is_refused() -> None:
