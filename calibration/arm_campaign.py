@@ -30,10 +30,10 @@ from serpar.calibration.arm_calibration import (
 from serpar.calibration.arm_error_models import FORMS, ArmModel, Prior, chain_forward
 from serpar.calibration.arm_identifiability import IdentifiabilityReport
 from serpar.calibration.panda_data import PandaPointData, load_panda_folder
-from serpar.calibration.poe_calibration import PoeChain, panda_poe_chain
+from serpar.calibration.poe_calibration import PoeChain, panda_poe_chain, robot_poe_chain
 from serpar.errors import IdentificationError, UnknownNameError
 from serpar.kinematics.mdh import Chain, panda_chain
-from serpar.sim.arm import FLANGE_D
+from serpar.kinematics.robot import PANDA, Robot, frame_transform
 from serpar.sim.arm_measurements import Measurements
 from serpar.sim.plants.static_panda import Campaign, TruthConfig, nominal_plant, run_campaign
 
@@ -50,19 +50,26 @@ on panda_1 25 of them either way (condition 376-1080 alone vs 414-676 for two), 
 on a single placement is well posed, only less well averaged."""
 
 
-def check_models(models: tuple[str, ...]) -> tuple[str, ...]:
+def check_models(models: tuple[str, ...], robot: Robot = PANDA) -> tuple[str, ...]:
+    """The models asked for, each known; the gravity-aware one only for the Panda, the one arm
+    with a nominal dynamic model here."""
     for m in models:
         if m not in MODELS:
             raise UnknownNameError("calibration model", m, MODELS)
+    if robot is not PANDA and "gravity" in models:
+        raise IdentificationError(f"--model gravity needs the arm's dynamic model, which only "
+                                  f"the Panda has here; for {robot.label} use --model geometric")
     return models
 
 
-def form_chain(form: str, tool_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-               ) -> Chain | PoeChain:
-    """The nominal Panda in the named form of the geometric error model (:data:`FORMS`)."""
+def form_chain(form: str, tool_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
+               robot: Robot = PANDA) -> Chain | PoeChain:
+    """The nominal arm in the named form of the geometric error model (:data:`FORMS`)."""
     if form not in FORMS:
         raise UnknownNameError("error-model form", form, FORMS)
-    return panda_chain(tool_offset) if form == "mdh" else panda_poe_chain(tool_offset)
+    if robot is PANDA:
+        return panda_chain(tool_offset) if form == "mdh" else panda_poe_chain(tool_offset)
+    return robot.chain(tool_offset) if form == "mdh" else robot_poe_chain(robot, tool_offset)
 
 
 def _fit(chain: Chain | PoeChain, name: str, meas: Measurements, start: NDArray[np.float64] | None = None
@@ -145,26 +152,31 @@ class FoldRow:
 
 
 def real_data_calibration(folder: str | PandaPointData, models: tuple[str, ...] = MODELS,
-                          progress: Callable[[int], object] | None = None, form: str = "mdh"
-                          ) -> tuple[FoldRow, ...]:
+                          progress: Callable[[int], object] | None = None, form: str = "mdh",
+                          robot: Robot = PANDA) -> tuple[FoldRow, ...]:
     """Per tool placement: calibrate on the other placements (one or more), score the held-out
     one. ``folder``: a panda_1-layout folder, or its data already loaded (whose notes the
     caller reports). The "nominal" row is the Panda's nominal table with only the ball offset
     fitted. ``progress(1)`` is called after each held-out placement; ``form``: of the error
-    model."""
-    check_models(models)
-    chain = form_chain(form)
-    data = folder if isinstance(folder, PandaPointData) else load_panda_folder(folder)
+    model; ``robot``: the arm measured (the Panda by default; another arm: geometric only, and
+    loaded data must be of that arm)."""
+    check_models(models, robot)
+    chain = form_chain(form, robot=robot)
+    data = folder if isinstance(folder, PandaPointData) else load_panda_folder(folder, robot)
+    if data.robot is not robot:
+        raise IdentificationError(f"{data.folder}: read as {data.robot.label}'s joint angles, "
+                                  f"calibrated as {robot.label}'s; load it with the same robot")
     if len(data.placements) < MIN_PLACEMENTS:
         raise IdentificationError(f"{data.folder}: {len(data.placements)} tool placement "
                                   f"folder(s) ({', '.join(data.placements)}); calibrating on "
                                   "one placement and testing on another held out needs at "
                                   f"least {MIN_PLACEMENTS}")
-    plant = nominal_plant(REAL_GRAVITY_PLANT)
+    plant = nominal_plant(REAL_GRAVITY_PLANT) if robot is PANDA else None
     rows = []
     for test in data.placements:
         train = tuple(p for p in data.placements if p != test)
-        sets = [data.point_set(p, tau_gravity=plant.gravity_torques(data.joint_angles(p)))
+        sets = [data.point_set(p, tau_gravity=None if plant is None
+                               else plant.gravity_torques(data.joint_angles(p)))
                 for p in (train, (test,))]
         ball = calibrate(ArmModel(chain, only=("tool.t",)), sets[0])
         fits = [("nominal", (ball, None))] + [(m, _fit(chain, m, sets[0], ball.chain_errors))
@@ -172,7 +184,7 @@ def real_data_calibration(folder: str | PandaPointData, models: tuple[str, ...] 
         for label, (cal, f_test) in fits:
             stats = [consistency_stats(cal.predict_positions(s.q, s.tau_gravity), s)
                      for s in sets]
-            rows.append(FoldRow(test, label, stats[0], stats[1], _ball(chain, cal), cal,
+            rows.append(FoldRow(test, label, stats[0], stats[1], _ball(chain, cal, robot), cal,
                                 f_test))
         if progress is not None:
             progress(1)
@@ -187,17 +199,21 @@ def fold_scheme(n_placements: int) -> str:
             "in turn")
 
 
-def _ball(chain: Chain | PoeChain, cal: ArmCalibration) -> NDArray[np.float64]:
-    """Tool point relative to the nominal flange: tool translation plus the j7.d error (the
-    two are one redundant pair; whichever the analysis kept holds the sum). In POE form the
-    tool error alone places it (M's frame is the flange's at q = 0)."""
+def _ball(chain: Chain | PoeChain, cal: ArmCalibration, robot: Robot = PANDA
+          ) -> NDArray[np.float64]:
+    """Tool point relative to the nominal flange: tool translation plus the last joint's d
+    error (the two are one redundant pair; whichever the analysis kept holds the sum), less
+    the flange's own offset, in the flange frame. In POE form the tool error alone places it
+    (M's frame is the flange's at q = 0)."""
     err = cal.chain_errors
     if isinstance(chain, PoeChain):
         return chain.tool_shift(err)  # chain built with a zero offset
     values = chain.values(err)
     names = chain.names
     tool = np.array([values[names.index(f"tool.t{a}")] for a in "xyz"])
-    return tool + np.array([0.0, 0.0, err[names.index("j7.d")] - FLANGE_D])
+    flange = frame_transform(robot.flange)
+    shift = tool + np.array([0.0, 0.0, err[names.index(f"j{robot.n_joints}.d")]])
+    return flange[:3, :3].T @ (shift - flange[:3, 3])
 
 
 def _cal_dict(cal: ArmCalibration, test: ComplianceTest | None) -> dict[str, object]:

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from serpar.calibration.arm_error_models import ArmModel, Layout, layout
 from serpar.errors import IdentificationError
 from serpar.kinematics.mdh import Chain, chain_frames, forward, pose_jacobian
-from serpar.sim.arm import Q_MAX, Q_MIN
+from serpar.kinematics.robot import PANDA, Robot
 from serpar.sim.arm_measurements import Measurements, PointSet
 
 GENERIC_POSES = 64
@@ -31,11 +31,13 @@ IK_ATTEMPTS = 20
 
 
 def position_ik(chain: Chain, values: NDArray[np.float64], target: NDArray[np.float64],
-                q0: NDArray[np.float64], iterations: int = 60) -> NDArray[np.float64]:
+                q0: NDArray[np.float64], iterations: int = 60, robot: Robot = PANDA
+                ) -> NDArray[np.float64]:
     """Damped least-squares IK of the tool point to ``target`` (3,) from each start q0 (M, n),
-    clipped to the joint limits; returns (M, n) with the rows that did not converge NaN."""
+    clipped to the robot's joint limits; returns (M, n) with the rows that did not converge
+    NaN."""
     q = np.array(q0, float)
-    lo, hi = np.asarray(Q_MIN), np.asarray(Q_MAX)
+    lo, hi = np.asarray(robot.q_min), np.asarray(robot.q_max)
     cols = chain.joint_elements
     for _ in range(iterations):
         frames = chain_frames(chain, values, q)
@@ -51,17 +53,20 @@ def position_ik(chain: Chain, values: NDArray[np.float64], target: NDArray[np.fl
 
 def consistent_sockets(chain: Any, values: NDArray[np.float64], counts: NDArray[np.int64],
                        rng: np.random.Generator, forward_fn: Callable[..., NDArray[np.float64]] = forward,
-                       ik_fn: Callable[..., NDArray[np.float64]] = position_ik
+                       ik_fn: Callable[..., NDArray[np.float64]] = position_ik,
+                       robot: Robot = PANDA
                        ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Joint angles (sum(counts), n) and socket ids: per socket a random reachable point, then
-    `count` IK solutions that reach it under the model (`forward_fn`/`ik_fn` of its form)."""
-    lo, hi = np.asarray(Q_MIN), np.asarray(Q_MAX)
+    `count` IK solutions within the robot's limits that reach it under the model
+    (`forward_fn`/`ik_fn` of its form)."""
+    lo, hi = np.asarray(robot.q_min), np.asarray(robot.q_max)
     q_all, ids = [], []
     for s, count in enumerate(counts):
         target = forward_fn(chain, values, rng.uniform(lo, hi)[None, :])[0, :3, 3]
         found: list[NDArray[np.float64]] = []
         for _ in range(IK_ATTEMPTS):
-            q = ik_fn(chain, values, target, rng.uniform(lo, hi, size=(2 * count, len(lo))))
+            q = ik_fn(chain, values, target, rng.uniform(lo, hi, size=(2 * count, len(lo))),
+                      robot=robot)
             found.extend(q[np.all(np.isfinite(q), axis=1)])
             if len(found) >= count:
                 break
@@ -83,9 +88,10 @@ def generic_design(model: ArmModel, meas: Measurements, x0: NDArray[np.float64],
     values = model.chain.values(dchain)
     if isinstance(meas, PointSet):
         counts = np.maximum(np.bincount(meas.point), PER_SOCKET)
-        q, point = consistent_sockets(model.chain, values, counts, rng)
+        q, point = consistent_sockets(model.chain, values, counts, rng, robot=meas.robot)
     else:
-        q = rng.uniform(Q_MIN, Q_MAX, size=(max(meas.n_poses, GENERIC_POSES), len(Q_MIN)))
+        q = rng.uniform(meas.robot.q_min, meas.robot.q_max,
+                        size=(max(meas.n_poses, GENERIC_POSES), meas.robot.n_joints))
     tau = None
     if meas.tau_gravity is not None:
         spread = np.asarray(meas.tau_gravity).std(axis=0)

@@ -2,11 +2,12 @@
 
 Columns (one row per measured arm configuration):
 
-- ``q1..q7`` commanded joint angles [rad] (what the encoders report at rest), required;
+- ``q1..qn`` commanded joint angles [rad] (what the encoders report at rest), one per joint of
+  the arm (the Panda's seven unless ``--robot`` names another), required;
 - ``kind``: ``position`` (a laser tracker saw the tool point at ``x, y, z`` [m], tracker
   frame) or ``point`` (the tool point sat in socket ``socket``, centre unknown); one kind per
   recording;
-- optional ``time`` [s] (when the pose was measured), ``approach1..7`` (+1 / -1: the sign of
+- optional ``time`` [s] (when the pose was measured), ``approach1..n`` (+1 / -1: the sign of
   each joint's last motion before the pose), ``set`` (``train`` / ``verify``: the campaign's
   own calibration and verification poses), ``placement`` (which fixture placement a socket
   belongs to).
@@ -18,6 +19,7 @@ flange frame), ``tool_mass_kg`` (for the nominal gravity torques).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +28,7 @@ from numpy.typing import NDArray
 
 from serpar.calibration.panda_data import SOCKET_DISTANCE_M, PandaPointData, load_panda_folder
 from serpar.errors import IdentificationError
-from serpar.sim.arm import N_JOINTS
+from serpar.kinematics.robot import PANDA, Robot
 from serpar.sim.arm_measurements import PointSet, PositionSet
 from serpar.sim.channels import (
     APPROACH,
@@ -36,11 +38,27 @@ from serpar.sim.channels import (
     MEASUREMENT_REQUIRED,
     MEASUREMENT_SETS,
     Q,
+    numbered,
 )
 from serpar.sim.recording import Recording, RecordingMeta
 
 KINDS, SETS = MEASUREMENT_KINDS, MEASUREMENT_SETS
 Q_COLS, APPROACH_COLS, COLUMNS_HELP = Q, APPROACH, MEASUREMENT_HELP
+_JOINT_COLUMN = re.compile(r"(q|approach)(\d+)")
+
+
+def columns(robot: Robot) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...], str]:
+    """(joint-angle columns, approach columns, every known column, help) for ``robot``."""
+    if robot.n_joints == len(Q_COLS):
+        q, approach = Q_COLS, APPROACH_COLS
+        known = (*MEASUREMENT_REQUIRED, *MEASUREMENT_OPTIONAL)
+        return q, approach, known, COLUMNS_HELP
+    n = robot.n_joints
+    q, approach = numbered("q", n), numbered("approach", n)
+    rest = tuple(c for c in (*MEASUREMENT_REQUIRED, *MEASUREMENT_OPTIONAL)
+                 if not _JOINT_COLUMN.fullmatch(c))
+    help_ = COLUMNS_HELP.replace("q1..q7", f"q1..q{n}").replace("approach1..7", f"approach1..{n}")
+    return q, approach, (*q, *approach, *rest), help_
 
 
 @dataclass(frozen=True)
@@ -59,6 +77,8 @@ class StaticArmData:
     tool_mass_kg: float = 0.0
     hand: bool = False
     """Whether the nominal gravity model carries the Franka Hand (its mass loads the joints)."""
+    robot: Robot = PANDA
+    """The arm measured: its joint count and limits check ``q``, its chain is the nominal."""
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -67,19 +87,20 @@ class StaticArmData:
         if self.kind == "position":
             if self.position is None:
                 raise IdentificationError("position measurements need columns x, y, z [m]")
-            PositionSet(self.q, self.position, self.sigma_m)
+            PositionSet(self.q, self.position, self.sigma_m, robot=self.robot)
         else:
             if self.socket is None:
                 raise IdentificationError("point measurements need a socket column")
             PointSet(self.q, np.asarray(self.socket, np.int64), self.distances, self.sigma_m,
-                     self.sigma_m)
+                     self.sigma_m, robot=self.robot)
         n = len(self.q)
         if self.time is not None and (self.time.shape != (n,) or not np.all(np.isfinite(self.time))):
             raise IdentificationError("measurement time must be one finite value [s] per row")
         if self.approach is not None:
             a = np.asarray(self.approach)
-            if a.shape != (n, N_JOINTS) or not np.all(np.isin(a, (-1.0, 1.0))):
-                raise IdentificationError("approach1..7 must be +1 or -1 in every row")
+            nj = self.robot.n_joints
+            if a.shape != (n, nj) or not np.all(np.isin(a, (-1.0, 1.0))):
+                raise IdentificationError(f"approach1..{nj} must be +1 or -1 in every row")
         if self.split is not None:
             bad = sorted(set(self.split.tolist()) - set(SETS))
             if bad:
@@ -94,30 +115,39 @@ def _col(table: pa.Table, name: str) -> NDArray:
     return table.column(name).to_numpy(zero_copy_only=False)
 
 
-def static_data(rec: Recording) -> StaticArmData:
-    """The static arm data of a recording; IdentificationError names what is missing."""
+def static_data(rec: Recording, robot: Robot = PANDA) -> StaticArmData:
+    """The static arm data of a recording of ``robot``; IdentificationError names what is
+    missing, or a joint count that is not the robot's."""
     table = rec.measurements
     if table is None or table.num_rows == 0:
         raise IdentificationError("the recording has no measurements table")
     cols = table.column_names
-    unknown = [c for c in cols if c not in (*MEASUREMENT_REQUIRED, *MEASUREMENT_OPTIONAL)]
+    q_cols, approach_cols, known, help_ = columns(robot)
+    joints = sorted(int(m.group(2)) for c in cols if (m := _JOINT_COLUMN.fullmatch(c))
+                    and m.group(1) == "q")
+    if joints and joints == list(range(1, len(joints) + 1)) and len(joints) != robot.n_joints:
+        raise IdentificationError(
+            f"the measurements have joint-angle columns {', '.join(f'q{j}' for j in joints)}; "
+            f"{robot.label} has {robot.n_joints} joints (q1..q{robot.n_joints}); give --robot "
+            "the arm that was measured")
+    unknown = [c for c in cols if c not in known]
     if unknown:
         raise IdentificationError(f"unknown measurement column(s) {', '.join(unknown)}; "
-                                  f"valid: {COLUMNS_HELP}")
-    missing = [c for c in MEASUREMENT_REQUIRED if c not in cols]
+                                  f"valid: {help_}")
+    missing = [c for c in (*q_cols, "kind") if c not in cols]
     if missing:
         raise IdentificationError(f"measurements lack column(s) {', '.join(missing)}; "
-                                  f"needed: {COLUMNS_HELP}")
+                                  f"needed: {help_}")
     kinds = sorted(set(_col(table, "kind").tolist()))
     if len(kinds) != 1:
         raise IdentificationError(f"measurements mix kinds {kinds}; one kind per recording "
                                   f"({', '.join(KINDS)})")
     meta = dict(rec.meta.model.get("measurements", {}))  # type: ignore[arg-type]
-    q = np.column_stack([_col(table, c).astype(float) for c in Q_COLS])
+    q = np.column_stack([_col(table, c).astype(float) for c in q_cols])
     pos = (np.column_stack([_col(table, c).astype(float) for c in "xyz"])
            if kinds[0] == "position" and all(c in cols for c in "xyz") else None)
-    approach = (np.column_stack([_col(table, c).astype(float) for c in APPROACH_COLS])
-                if all(c in cols for c in APPROACH_COLS) else None)
+    approach = (np.column_stack([_col(table, c).astype(float) for c in approach_cols])
+                if all(c in cols for c in approach_cols) else None)
     return StaticArmData(
         q=q, kind=kinds[0], sigma_m=float(meta.get("sigma_m", 50e-6)), position=pos,
         socket=_col(table, "socket").astype(np.int64) if "socket" in cols else None,
@@ -127,13 +157,15 @@ def static_data(rec: Recording) -> StaticArmData:
         split=_col(table, "set").astype(str) if "set" in cols else None,
         placement=_col(table, "placement").astype(str) if "placement" in cols else None,
         tool_offset_m=tuple(float(v) for v in meta.get("tool_offset_m", (0.0, 0.0, 0.0))),
-        tool_mass_kg=float(meta.get("tool_mass_kg", 0.0)), hand=bool(meta.get("hand", False)))
+        tool_mass_kg=float(meta.get("tool_mass_kg", 0.0)), hand=bool(meta.get("hand", False)),
+        robot=robot)
 
 
 def to_recording(data: StaticArmData, source: str, notes: dict[str, object] | None = None
                  ) -> Recording:
     """A measurement-only recording (its signals table holds an empty ``time`` column)."""
-    cols: dict[str, pa.Array] = {c: pa.array(data.q[:, j]) for j, c in enumerate(Q_COLS)}
+    q_cols, approach_cols, _, _ = columns(data.robot)
+    cols: dict[str, pa.Array] = {c: pa.array(data.q[:, j]) for j, c in enumerate(q_cols)}
     cols["kind"] = pa.array([data.kind] * data.n)
     if data.position is not None:
         cols.update({c: pa.array(data.position[:, i]) for i, c in enumerate("xyz")})
@@ -142,7 +174,7 @@ def to_recording(data: StaticArmData, source: str, notes: dict[str, object] | No
     if data.time is not None:
         cols["time"] = pa.array(data.time)
     if data.approach is not None:
-        cols.update({c: pa.array(data.approach[:, j]) for j, c in enumerate(APPROACH_COLS)})
+        cols.update({c: pa.array(data.approach[:, j]) for j, c in enumerate(approach_cols)})
     if data.split is not None:
         cols["set"] = pa.array(data.split.tolist())
     if data.placement is not None:
@@ -151,6 +183,8 @@ def to_recording(data: StaticArmData, source: str, notes: dict[str, object] | No
                               "distances": [list(d) for d in data.distances],
                               "tool_offset_m": list(data.tool_offset_m),
                               "tool_mass_kg": data.tool_mass_kg, "hand": data.hand},
+             **({} if data.robot is PANDA else
+                {"robot": {"name": data.robot.name, "source": data.robot.source}}),
              **(notes or {})}
     meta = RecordingMeta(source=source, sample_rate_hz=1.0, channels=("time",), model=model)
     return Recording(meta, pa.table({"time": pa.array(np.zeros(0))}), pa.table(cols))
@@ -168,4 +202,4 @@ def panda_folder_data(folder: str | PandaPointData, sigma_m: float = 50e-6) -> S
             place.extend([name] * len(rows))
         dist.append((2 * k, 2 * k + 1, SOCKET_DISTANCE_M))
     return StaticArmData(np.vstack(q), "point", sigma_m, socket=np.concatenate(sock),
-                         distances=tuple(dist), placement=np.asarray(place))
+                         distances=tuple(dist), placement=np.asarray(place), robot=raw.robot)

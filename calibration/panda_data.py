@@ -2,11 +2,12 @@
 
 Layout: one folder per placement of the two-socket calibration tool
 (``front/``, ``right/``, ``back-high/`` in the real data), each holding ``hole_0.csv`` and
-``hole_1.csv``: one arm configuration per row, seven joint angles in radians (joint 1
-first), no header. The sockets' centres are :data:`SOCKET_DISTANCE_M` apart.
+``hole_1.csv``: one arm configuration per row, one joint angle per joint in radians (joint 1
+first; seven for the Panda, the default arm), no header. The sockets' centres are
+:data:`SOCKET_DISTANCE_M` apart.
 
 Every row of every socket file is used or the load fails with what is wrong: a placement
-folder with one socket file but not the other, a row that is not seven finite numbers, a
+folder with one socket file but not the other, a row that is not one finite number per joint, a
 socket with too few rows, no placement folder at all. What published folders carry besides
 (``hole_0_pose.csv``, ``comments.txt``, a ``photos/`` folder without socket files) is not
 read, and each such file or folder is named in :attr:`PandaPointData.notes`, so nothing is
@@ -23,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from serpar.errors import IdentificationError
-from serpar.sim.arm import N_JOINTS
+from serpar.kinematics.robot import PANDA, Robot
 from serpar.sim.arm_measurements import PointSet
 
 SOCKET_FILES = ("hole_0.csv", "hole_1.csv")
@@ -44,6 +45,8 @@ class PandaPointData:
     q: tuple[tuple[NDArray[np.float64], ...], ...]
     notes: tuple[str, ...] = ()
     """One line per file or folder of the data folder that was not read, and why."""
+    robot: Robot = PANDA
+    """The arm the rows' joint angles belong to (its joint count and limits)."""
 
     def point_set(self, placements: tuple[str, ...], sigma: float = 50e-6,
                   tau_gravity: NDArray[np.float64] | None = None) -> PointSet:
@@ -61,16 +64,17 @@ class PandaPointData:
                 point.append(np.full(len(rows), 2 * k + s))
             distances.append((2 * k, 2 * k + 1, SOCKET_DISTANCE_M))
         return PointSet(np.vstack(q), np.concatenate(point), tuple(distances), sigma=sigma,
-                        sigma_distance=sigma, tau_gravity=tau_gravity)
+                        sigma_distance=sigma, tau_gravity=tau_gravity, robot=self.robot)
 
     def joint_angles(self, placements: tuple[str, ...]) -> NDArray[np.float64]:
         return np.vstack([rows for name in placements
                           for rows in self.q[self.placements.index(name)]])
 
 
-def load_panda_folder(folder: str | Path) -> PandaPointData:
-    """Read a panda_1-layout folder; IdentificationError names what is missing or wrong.
-    Files and folders that are not socket files are skipped and named in ``notes``."""
+def load_panda_folder(folder: str | Path, robot: Robot = PANDA) -> PandaPointData:
+    """Read a panda_1-layout folder of ``robot``'s joint angles (one per joint a row);
+    IdentificationError names what is missing or wrong. Files and folders that are not
+    socket files are skipped and named in ``notes``."""
     root = Path(folder)
     if not root.is_dir():
         raise IdentificationError(f"data folder {str(root)!r} does not exist")
@@ -91,13 +95,13 @@ def load_panda_folder(folder: str | Path) -> PandaPointData:
         notes.extend(_ignored(root, p, "not a socket file") for p in _visible(d)
                      if p.name not in SOCKET_FILES or not p.is_file())
         placements.append(d.name)
-        q.append(tuple(_read_csv(d / f) for f in SOCKET_FILES))
+        q.append(tuple(_read_csv(d / f, robot) for f in SOCKET_FILES))
     if not placements:
         seen = [_rel(root, p) for p in entries if p.name not in IGNORED_FILES]
         skipped = f" (ignored: {', '.join(seen)})" if seen else ""
         raise IdentificationError(f"{root}: no tool-placement folders{skipped}; expected e.g. "
                                   f"front/{SOCKET_FILES[0]} and front/{SOCKET_FILES[1]}")
-    return PandaPointData(str(root), tuple(placements), tuple(q), tuple(notes))
+    return PandaPointData(str(root), tuple(placements), tuple(q), tuple(notes), robot)
 
 
 def _visible(folder: Path) -> list[Path]:
@@ -114,15 +118,15 @@ def _ignored(root: Path, path: Path, why: str) -> str:
     return f"ignored {_rel(root, path)}: {why} ({READ_FOR})"
 
 
-def _read_csv(path: Path) -> NDArray[np.float64]:
+def _read_csv(path: Path, robot: Robot) -> NDArray[np.float64]:
     rows = []
     with path.open(newline="") as fh:
         for line_no, row in enumerate(csv.reader(fh), start=1):
             if not row or all(not c.strip() for c in row):
                 raise IdentificationError(f"{path} line {line_no}: empty row")
-            if len(row) != N_JOINTS:
-                raise IdentificationError(f"{path} line {line_no}: expected {N_JOINTS} joint "
-                                          f"angles, got {len(row)} values")
+            if len(row) != robot.n_joints:
+                raise IdentificationError(f"{path} line {line_no}: expected {robot.n_joints} "
+                                          f"joint angles ({robot.label}), got {len(row)} values")
             try:
                 values = [float(c) for c in row]
             except ValueError:

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from serpar.errors import ConfigError
 from serpar.kinematics.mdh import FRAME_PARAMS, elementary
 from serpar.kinematics.poe import adjoint, exp_twist, se3_left_jacobian, skew
-from serpar.sim.arm import FLANGE_D, MDH_A, MDH_ALPHA, MDH_D, N_JOINTS
+from serpar.kinematics.robot import PANDA, Robot, frame_transform
 
 Array = NDArray[np.float64]
 
@@ -107,23 +107,31 @@ class PoeChain:
         return exp_twist(np.asarray(values, float)[-6:][_TWIST_ORDER], 1.0)[:3, 3]
 
 
-def panda_poe_chain(tool_offset: Sequence[float] = (0.0, 0.0, 0.0)) -> PoeChain:
-    """The Panda from :mod:`serpar.sim.arm`'s MD-H table in POE form, tool point ``tool_offset`` [m]
-    in the flange frame (the same nominal kinematics as :func:`serpar.kinematics.mdh.panda_chain`)."""
+def robot_poe_chain(robot: Robot, tool_offset: Sequence[float] = (0.0, 0.0, 0.0)) -> PoeChain:
+    """A robot's MD-H(+beta) table (:class:`serpar.kinematics.robot.Robot`) in POE form, tool point
+    ``tool_offset`` [m] in the flange frame (the same nominal kinematics as ``robot.chain``)."""
     tool = np.asarray(tool_offset, float).reshape(-1)
     if tool.shape != (3,) or not np.all(np.isfinite(tool)):
         raise ConfigError(f"tool_offset must be 3 finite numbers [m], got {tool_offset!r}")
-    frame = np.eye(4)
+    frame = frame_transform(robot.base)
     frames = []
-    for i in range(N_JOINTS):
-        # RotX(alpha) TransX(a) [RotZ(q)] TransZ(d): TransZ commutes with the joint rotation,
-        # so the frame after it still has its z on the axis and its origin on the axis
-        for kind, v in (("rx", MDH_ALPHA[i]), ("tx", MDH_A[i]), ("tz", MDH_D[i])):
+    for alpha, a, theta, d, beta in robot.links:
+        # RotX(alpha) TransX(a) [RotZ(theta + q)] TransZ(d): RotZ and TransZ commute with the
+        # joint rotation, so the frame after them has its z on the axis and its origin on it
+        for kind, v in (("rx", alpha), ("tx", a), ("rz", theta), ("tz", d)):
             frame = frame @ elementary(kind, np.array([v]))[0]
         frames.append(frame)
-    home = frame @ elementary("tz", np.array([FLANGE_D]))[0]
+        frame = frame @ elementary("ry", np.array([beta]))[0]
+    home = frame @ frame_transform(robot.flange)
     home[:3, 3] += home[:3, :3] @ tool
     return PoeChain(np.array(frames), home)
+
+
+def panda_poe_chain(tool_offset: Sequence[float] = (0.0, 0.0, 0.0)) -> PoeChain:
+    """The Panda (:mod:`serpar.kinematics.panda`'s MD-H table) in POE form, tool point
+    ``tool_offset`` [m] in the flange frame (the same nominal kinematics as
+    :func:`serpar.kinematics.mdh.panda_chain`)."""
+    return robot_poe_chain(PANDA, tool_offset)
 
 
 @dataclass(frozen=True)

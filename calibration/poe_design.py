@@ -19,16 +19,17 @@ from serpar.calibration.arm_design import IK_TOL_M, PER_SOCKET, consistent_socke
 from serpar.calibration.arm_error_models import ArmModel, chain_forward, chain_kinematics, layout
 from serpar.calibration.poe_calibration import PoeChain
 from serpar.kinematics.mdh import Chain
-from serpar.sim.arm import Q_MAX, Q_MIN
+from serpar.kinematics.robot import PANDA, Robot
 from serpar.sim.arm_measurements import Measurements, PointSet
 
 
 def tool_ik(chain: Chain | PoeChain, values: NDArray[np.float64], target: NDArray[np.float64],
-            q0: NDArray[np.float64], iterations: int = 60) -> NDArray[np.float64]:
+            q0: NDArray[np.float64], iterations: int = 60, robot: Robot = PANDA
+            ) -> NDArray[np.float64]:
     """Damped least-squares IK of the tool point to ``target`` (3,) from each start q0 (M, n),
-    clipped to the joint limits, either form; rows that did not converge are NaN."""
+    clipped to the robot's joint limits, either form; rows that did not converge are NaN."""
     q = np.array(q0, float)
-    lo, hi = np.asarray(Q_MIN), np.asarray(Q_MAX)
+    lo, hi = np.asarray(robot.q_min), np.asarray(robot.q_max)
     for _ in range(iterations):
         tool, _, jac_q = chain_kinematics(chain, values, q, params=False)
         err = target[None, :] - tool[:, :3, 3]
@@ -50,7 +51,8 @@ def design_for(model: ArmModel, meas: Measurements, x0: NDArray[np.float64], see
     lay = layout(model, meas)
     values = model.chain.values(lay.split(x0)[1])
     counts = np.maximum(np.bincount(meas.point), PER_SOCKET)
-    q, point = consistent_sockets(model.chain, values, counts, rng, chain_forward, tool_ik)
+    q, point = consistent_sockets(model.chain, values, counts, rng, chain_forward, tool_ik,
+                                  meas.robot)
     tau = None
     if meas.tau_gravity is not None:
         # the same rule as arm_design: random loads of the campaign's spread, zero where the

@@ -1,6 +1,7 @@
 """``serpar calibrate arm``: gravity-aware kinematic calibration of the arm (seed 003), on the
 simulated Panda or on a panda_1-layout point-consistency folder, with the geometric error
-model in MD-H(+beta) form (seed 003), POE/screw form (seed 001) or both side by side."""
+model in MD-H(+beta) form (seed 003), POE/screw form (seed 001) or both side by side;
+``--robot FILE``: another arm from its URDF/MJCF (geometric model only)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from typing import TYPE_CHECKING
 
 from serpar.calibration.arm_campaign import (
     PAPER_MEAN_REDUCTION,
+    check_models,
     fold_dict,
     fold_scheme,
     real_data_calibration,
@@ -17,9 +19,14 @@ from serpar.calibration.arm_campaign import (
 )
 from serpar.calibration.panda_data import load_panda_folder
 from serpar.calibration.poe_calibration import GAUGE
+from serpar.calibration.robot_campaign import noise_bound_rms, robot_calibration
 from serpar.cli.output import print_json, progress, table
+from serpar.cli.robot_option import add_robot_option
 from serpar.errors import ConfigError
+from serpar.kinematics.robot import PANDA, Robot
+from serpar.sim.plants.static_arm import GeometricCampaignConfig, run_geometric_campaign
 from serpar.sim.plants.static_panda import TruthConfig, run_campaign
+from serpar.sim.robot_file import load_robot
 
 if TYPE_CHECKING:
     from serpar.calibration.arm_calibration import ArmCalibration, ComplianceTest
@@ -49,6 +56,7 @@ def register_arm(calibrate_sub: argparse._SubParsersAction) -> argparse.Argument
                         "the other placements, test on one, each in turn")
     p.add_argument("--seed", type=int, default=3,
                    help="hidden errors, poses and tracker noise of the simulated arm (default 3)")
+    add_robot_option(p)
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_calibrate_arm)
     return p
@@ -66,14 +74,56 @@ def cmd_calibrate_arm(args: argparse.Namespace) -> int:
     from pathlib import Path
 
 
-    models = tuple(dict.fromkeys(args.model)) if args.model else MODEL_CHOICES
+    robot = load_robot(getattr(args, "robot", None))
+    default_models = MODEL_CHOICES if robot is PANDA else ("geometric",)
+    models = check_models(tuple(dict.fromkeys(args.model)) if args.model else default_models,
+                          robot)
     form = getattr(args, "form", "mdh")
     forms = ("mdh", "poe") if form == "both" else (form,)
     if args.data is not None:
         if not Path(args.data).is_dir():
             raise ConfigError(f"--data {args.data!r}: folder does not exist")
-        return _real(args.data, models, args.json, forms)
+        return _real(args.data, models, args.json, forms, robot)
+    if robot is not PANDA:
+        return _robot_simulated(robot, args.seed, args.json, forms)
     return _simulated(args.seed, models, args.json, forms)
+
+
+def _robot_simulated(robot: Robot, seed: int, as_json: bool, forms: tuple[str, ...]) -> int:
+    """The geometric campaign of an arm from its model file (serpar.calibration.robot_campaign)."""
+    cfg = GeometricCampaignConfig(seed=seed)
+    camp = run_geometric_campaign(robot, cfg)
+    results = {f: robot_calibration(robot, cfg, f, camp) for f in forms}
+    if as_json:
+        print_json(results[forms[0]].as_dict() if len(forms) == 1
+                   else {"robot": {"name": robot.name, "source": robot.source},
+                         "forms": {f: r.as_dict() for f, r in results.items()}})
+        return 0
+    bound = noise_bound_rms(cfg.tracker_sigma_m)
+    print(f"Simulated {robot.label}, {robot.n_joints} joints, seed {cfg.seed}, geometric "
+          f"campaign (rigid joints, no gravity model): hidden link errors "
+          f"{cfg.link_pos_sigma_m * 1e3:g} mm / {cfg.link_rot_sigma_rad * 1e3:g} mrad, base "
+          f"{cfg.base_pos_sigma_m * 1e3:g} mm / {cfg.base_rot_sigma_rad * 1e3:g} mrad, SMR "
+          f"{cfg.tool_pos_sigma_m * 1e3:g} mm (1 sigma); tracker noise "
+          f"{cfg.tracker_sigma_m * 1e6:g} um (held-out RMS floor {bound * 1e6:.1f} um); "
+          f"{cfg.n_train} training + {cfg.n_verify} verification poses")
+    names = {"uncalibrated": "uncalibrated", "geometric": "geometry-only"}
+    rows = []
+    for form, res in results.items():
+        for r in res.rows:
+            if r.calibration is None and form != forms[0]:
+                continue
+            label = _label(names[r.label], form, forms, r.calibration)
+            rows.append([label, _um(r.verify.rms), _um(r.verify.mean), _um(r.verify.max),
+                         _um(r.verify_truth.rms), f"{r.verify.rms / bound:.2f}",
+                         "" if r.calibration is None else f"{r.calibration.report.rank}"])
+    print(table(["verification poses [um]", "rms", "mean", "max", "rms vs truth",
+                 "rms / noise floor", "params"], rows))
+    for form, res in results.items():
+        cal = res.row("geometric").calibration
+        if cal is not None:
+            _print_report(_label("geometry-only", form, forms, True), cal, None)
+    return 0
 
 
 def _simulated(seed: int, models: tuple[str, ...], as_json: bool,
@@ -157,21 +207,24 @@ def _print_report(label: str, cal: ArmCalibration, test: ComplianceTest | None) 
 
 
 def _real(folder: str, models: tuple[str, ...], as_json: bool,
-          forms: tuple[str, ...] = ("mdh",)) -> int:
-    data = load_panda_folder(folder)  # once: its notes are printed, every form reuses it
+          forms: tuple[str, ...] = ("mdh",), robot: Robot = PANDA) -> int:
+    data = load_panda_folder(folder, robot)  # once: its notes are printed, every form reuses it
     n_folds = len(data.placements)
     with progress(n_folds * len(forms), "calibrate arm", enabled=sys.stderr.isatty()) as bar:
-        by_form = {f: real_data_calibration(data, models, bar.update, f) for f in forms}
+        by_form = {f: real_data_calibration(data, models, bar.update, f, robot) for f in forms}
     # fold by fold; the "nominal" row (ball offset only) is the same model in both forms
     rows = [r for test in dict.fromkeys(r.test for r in by_form[forms[0]])
             for f in forms for r in by_form[f]
             if r.test == test and (r.label != "nominal" or f == forms[0])]
     if as_json:
         print_json({"folder": folder, "scheme": fold_scheme(n_folds), "notes": list(data.notes),
+                    **({} if robot is PANDA else
+                       {"robot": {"name": robot.name, "source": robot.source}}),
                     "folds": [fold_dict(r) for r in rows]})
         return 0
+    arm = "the Panda" if robot is PANDA else robot.label
     print(f"Point-consistency data {folder}: {fold_scheme(n_folds)}; "
-          "'nominal' = the Panda's nominal table with only the ball offset fitted")
+          f"'nominal' = {arm}'s nominal table with only the ball offset fitted")
     for note in data.notes:
         print(f"note: {note}")
     names = {"nominal": "nominal", "geometric": "geometry-only", "gravity": "gravity-aware"}

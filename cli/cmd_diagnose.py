@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 
 from serpar.cli.output import print_json, progress, table
+from serpar.cli.robot_option import add_robot_option
 from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis, load_notes
 from serpar.diagnosis.config_model import is_config_path, model_from_episode_config
 from serpar.diagnosis.prior import PriorFamily
@@ -15,6 +16,7 @@ from serpar.diagnosis.select import diagnose
 from serpar.errors import ConfigError
 from serpar.sim.model_file import parse_model, read_model_file
 from serpar.sim.plants.from_model_file import KNOWN_EFFECTS, applied_parts, arm_plant_changes
+from serpar.sim.robot_file import load_robot
 
 
 def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -34,6 +36,7 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "updated by what this recording shows")
     p.add_argument("--seed", type=int, default=0, help="seed of the train/held-out split "
                                                        "where the recording does not fix it")
+    add_robot_option(p)
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_diagnose)
     return p
@@ -54,6 +57,9 @@ def print_diagnosis(diag, source: str) -> None:  # type: ignore[no-untyped-def]
     print(f"\nheld-out RMS / noise: {diag.heldout_rms_before:.3g} before -> "
           f"{diag.heldout_rms_after:.3g} after (noise floor 1, p = {diag.heldout_p_after:.2g}); "
           f"{100 * diag.explained:.1f} % of the excess held-out residual explained")
+    if diag.physical is not None:
+        print("held-out RMS in physical units, before -> after: " + ", ".join(
+            f"{r.channel} {r.before:.3g} -> {r.after:.3g} {r.unit}" for r in diag.physical.rms))
     print(f"verdict: {diag.verdict}")
 
 
@@ -75,8 +81,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     import sys
 
 
-    rec = load_for_diagnosis(args.recording)
-    family = family_from_recording(rec)
+    robot = load_robot(getattr(args, "robot", None))
+    rec = load_for_diagnosis(args.recording, robot)
+    family = family_from_recording(rec, robot)
     notes = load_notes(rec) + list(getattr(family, "notes", ()))  # the data's, then the family's
     prior = None
     if args.model:
@@ -94,6 +101,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if prior is not None:  # the written model: M's effects, corrected, plus the new ones
         diag = dataclasses.replace(diag, model=prior.combined_model(diag.model))
     plant = plant_summary({"source": str(args.recording), **diag.model})
+    if robot.source != "built-in":  # serpar run's cell holds the Panda, not this arm
+        why = f"a model of {robot.label}: serpar run's cell has the Panda"
+        plant = {"applied": [], "not_applied": [why]}
     paths = None
     if args.report:
 
@@ -107,6 +117,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             out["prior_model"], out["fixed_effects"] = args.model, list(prior.fixed)
         out["plant"] = plant
         out["notes"] = notes
+        if getattr(args, "robot", None):
+            out["robot"] = {"name": robot.name, "source": robot.source}
         print_json(out)
     else:
         for note in notes:

@@ -25,6 +25,7 @@ from serpar.diagnosis.empirical import BasisGroup
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows
 from serpar.diagnosis.residual import consecutive_noise_ratio
+from serpar.diagnosis.units import UnitView, per_row
 from serpar.errors import IdentificationError
 from serpar.sim import channels as ch
 from serpar.sim.recording import Recording
@@ -119,6 +120,17 @@ class ArmDynamicsFamily:
         sensor noise survives them, the slow residual of missing physics cancels)."""
         r = consecutive_noise_ratio(rows, whitened, len(self.channels))
         return None if r is None else (r, "sample-to-sample differences")
+
+    def in_units(self, rows: NDArray[np.int64]) -> UnitView:
+        """Each joint's torque channels in N m (windowed, as compared): the sensor's and, with
+        a command, the command's; measured = the windowed recording."""
+        t, n = self.terms, len(self.channels)
+        channel, axis = per_row(t.time[rows], n)
+        sigma = np.hstack([t.sigma_link[rows], t.sigma_drive[rows]])[:, :n]
+        measured = np.hstack([t.link[rows] + t.tau_link_model[rows],
+                              t.drive[rows] + t.tau_full_model[rows]])[:, :n]
+        return UnitView(self.channels, ("N m",) * n, channel, sigma.ravel(), axis,
+                        "time [s]", measured.ravel())
 
     def empirical_library(self) -> list[BasisGroup]:
         """Shapes in each joint's angle, velocity and time (diagnosis/arm_dynamics_empirical.py)."""

@@ -24,7 +24,6 @@ if TYPE_CHECKING:
 RANK_TOL = 1e-6
 """A unit column closer than this to the span of the kept ones is not identifiable here."""
 NULL_TOL = 1e-9
-N_JOINTS = 7
 
 
 def chain_rank(name: str) -> int:
@@ -77,25 +76,26 @@ def _full_effects(fam: StaticArmFamily) -> list[tuple[Effect, NDArray[np.float64
                        np.zeros(len(geo)), np.full(len(geo), -0.05), np.full(len(geo), 0.05)),
                 np.zeros(len(geo))))
     fam.geo_idx = np.asarray(geo, int)
-    j = range(1, N_JOINTS + 1)
+    nj = chain.n_joints  # the arm's joints (the Panda's 7 unless --robot names another)
+    j = range(1, nj + 1)
     out.append((Effect("joint_compliance", "joint compliance (gravitational deflection)",
-                       tuple(f"c{k}" for k in j), ("rad/(N m)",) * N_JOINTS,
-                       np.zeros(N_JOINTS), np.zeros(N_JOINTS), np.full(N_JOINTS, 1e-3),
+                       tuple(f"c{k}" for k in j), ("rad/(N m)",) * nj,
+                       np.zeros(nj), np.zeros(nj), np.full(nj, 1e-3),
                        physical_lower=True),
-                np.zeros(N_JOINTS)))
+                np.zeros(nj)))
     friction = fam.data.approach is not None
     bn = tuple(f"b{k}" for k in j) + (("f",) if friction else ())
-    bu = ("rad",) * N_JOINTS + (("N m",) if friction else ())
+    bu = ("rad",) * nj + (("N m",) if friction else ())
     lo = np.zeros(len(bn))
-    hi = np.r_[np.full(N_JOINTS, 0.02), [3.0] if friction else []]
-    x0 = np.r_[np.zeros(N_JOINTS), [0.2] if friction else []]
+    hi = np.r_[np.full(nj, 0.02), [3.0] if friction else []]
+    x0 = np.r_[np.zeros(nj), [0.2] if friction else []]
     out.append((Effect("backlash", "joint backlash (clearance between motor and link)", bn, bu,
-                       x0, lo, hi, physical_lower=True), np.r_[np.full(N_JOINTS, 1e-3), x0[N_JOINTS:]]))
+                       x0, lo, hi, physical_lower=True), np.r_[np.full(nj, 1e-3), x0[nj:]]))
     en = tuple(f"o{k}" for k in j) + tuple(f"s{k}" for k in j)
     out.append((Effect("encoder", "encoder offset and scale (transmission error)", en,
-                       ("rad",) * N_JOINTS + ("-",) * N_JOINTS, np.zeros(2 * N_JOINTS),
-                       np.full(2 * N_JOINTS, -0.05), np.full(2 * N_JOINTS, 0.05)),
-                np.zeros(2 * N_JOINTS)))
+                       ("rad",) * nj + ("-",) * nj, np.zeros(2 * nj),
+                       np.full(2 * nj, -0.05), np.full(2 * nj, 0.05)),
+                np.zeros(2 * nj)))
     if fam.t is not None and np.ptp(fam.t) > 0:
         out.append((Effect("thermal_drift", "thermal drift of link lengths over time",
                            ("kappa",), ("1/s",), np.zeros(1), np.full(1, -1e-6),

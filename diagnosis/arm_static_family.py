@@ -1,7 +1,8 @@
 """Static arm measurements as a diagnosis :class:`~serpar.diagnosis.family.Family`.
 
 Nominal model: the Panda's MD-H table (:func:`serpar.kinematics.mdh.panda_chain`) with the recording's
-nominal tool offset and rigid joints. Baseline, always fitted: the tool point's offset and,
+nominal tool offset and rigid joints; for another arm (``--robot FILE``, ``data.robot``) its
+table read from the model file, and the gravity torques of that file's own inertials. Baseline, always fitted: the tool point's offset and,
 for laser-tracker data, the tracker's registration to the arm base (6). For point-consistency
 data the socket centres are eliminated in closed form (each socket's centre is the mean of
 its predicted points in the rows evaluated), so a held-out placement needs no fitted centre.
@@ -31,9 +32,12 @@ from serpar.diagnosis.arm_static_model import (
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows
 from serpar.diagnosis.stability import default_folds
+from serpar.diagnosis.units import UnitView, per_row
 from serpar.errors import IdentificationError
 from serpar.kinematics.mdh import panda_chain
+from serpar.kinematics.robot import PANDA
 from serpar.sim.plants.static_panda import TruthConfig, nominal_plant
+from serpar.sim.robot_file import gravity_torques
 
 BASELINE_PARAMS = {"position": ("base.tx", "base.ty", "base.tz", "base.rx", "base.ry",
                                 "base.rz", "tool.tx", "tool.ty", "tool.tz"),
@@ -41,21 +45,34 @@ BASELINE_PARAMS = {"position": ("base.tx", "base.ty", "base.tz", "base.rx", "bas
 
 
 class StaticArmFamily:
-    """Laser-tracker positions or point-consistency sets of a 7-joint arm."""
+    """Laser-tracker positions or point-consistency sets of a serial arm (the Panda's 7 joints
+    unless the data name another robot)."""
 
     def __init__(self, data: StaticArmData) -> None:
         self.data = data
-        self.kind = f"arm static ({'laser tracker' if data.kind == 'position' else 'point consistency'})"
-        self.chain = panda_chain(data.tool_offset_m)
-        plant = nominal_plant(TruthConfig(tool_mass_kg=data.tool_mass_kg, hand=data.hand,
-                                          tool_offset_m=data.tool_offset_m))
-        self.tau = plant.gravity_torques(data.q)
+        robot = data.robot
+        arm = "" if robot is PANDA else f", {robot.label}"
+        self.kind = (f"arm static ({'laser tracker' if data.kind == 'position' else 'point consistency'}"
+                     f"{arm})")
+        if robot is PANDA:
+            self.chain = panda_chain(data.tool_offset_m)
+            plant = nominal_plant(TruthConfig(tool_mass_kg=data.tool_mass_kg, hand=data.hand,
+                                              tool_offset_m=data.tool_offset_m))
+            gravity = plant.gravity_torques
+        else:  # the file's own inertials: the model a controller of that arm would use
+            self.chain = robot.chain(data.tool_offset_m)
+
+            def gravity(q: NDArray[np.float64]) -> NDArray[np.float64]:
+                return gravity_torques(robot, q)
+        self.tau = gravity(data.q)
         """Nominal gravity torques [N m] at the commanded angles (the controller's model)."""
         h = 1e-6
-        self.dtau = np.stack([(plant.gravity_torques(data.q + h * e) -
-                               plant.gravity_torques(data.q - h * e)) / (2 * h)
+        self.dtau = np.stack([(gravity(data.q + h * e) - gravity(data.q - h * e)) / (2 * h)
                               for e in np.eye(data.q.shape[1])], axis=2)
-        """(N, 7, 7) d tau_g / dq at the commanded angles (central differences)."""
+        """(N, n, n) d tau_g / dq at the commanded angles (central differences)."""
+        # the two most loaded joints split the poses by gravity load (the Panda's j2 and j4)
+        self.loaded = ((1, 3) if robot is PANDA else
+                       tuple(sorted(np.argsort(-np.sqrt(np.mean(self.tau**2, axis=0)))[:2])))
         self.t = None if data.time is None else data.time - data.time.min()
         self.n_samples = data.n
         names = self.chain.names
@@ -77,8 +94,8 @@ class StaticArmFamily:
 
     # -- the model -------------------------------------------------------------------------
     def _state(self, params: Mapping[str, NDArray[np.float64]], rows: NDArray[np.int64]):
-        """Per-row element values (n, E), their thermal factor (n,), link angles (n, 7) and,
-        per parameter of every joint-space block, d(link angles)/d(parameter) (n, 7)."""
+        """Per-row element values (n, E), their thermal factor (n,), link angles (n, joints)
+        and, per parameter of every joint-space block, d(link angles)/d(parameter)."""
         delta = np.zeros(self.chain.size)
         if "baseline" in params:
             delta[self.base_idx] += params["baseline"]
@@ -112,7 +129,7 @@ class StaticArmFamily:
         rows = np.asarray(rows, np.int64)
         values, factor, link, dlink = self._state(params, rows)
         p, g = element_jacobian(self.chain, values, link)          # (n, 3), (n, 3, E)
-        gq = g[:, :, self.chain.joint_elements]                    # (n, 3, 7)
+        gq = g[:, :, self.chain.joint_elements]                    # (n, 3, joints)
         scaled = np.ones_like(values)
         scaled[:, self.lengths] = factor[:, None]
         cols = []
@@ -185,6 +202,25 @@ class StaticArmFamily:
                 extra.append((np.linalg.norm(ca - cb) - dist) / s)
         return np.concatenate([r.ravel(), np.asarray(extra, float)])
 
+    def in_units(self, rows: NDArray[np.int64]) -> UnitView:
+        """x, y, z of each measured tool point in mm (position data: against the tracker;
+        point data: about its socket's mean), then each fixture distance in mm."""
+        rows = np.asarray(rows, np.int64)
+        d = self.data
+        channel, axis = per_row(rows.astype(float), 3)
+        mm = 1e3 * d.sigma_m
+        if d.kind == "position":
+            return UnitView(("x", "y", "z"), ("mm",) * 3, channel, np.full(3 * len(rows), mm),
+                            axis, "measurement", 1e3 * d.position[rows].ravel())  # type: ignore[index]
+        sock = d.socket[rows]  # type: ignore[index]
+        count = {int(s): int((sock == s).sum()) for s in np.unique(sock)}
+        scale = np.repeat([mm * np.sqrt(max(1.0 - 1.0 / count[int(s)], 0.0)) for s in sock], 3)
+        extra = [mm * np.sqrt(1.0 + 1.0 / count[a] + 1.0 / count[b])
+                 for a, b, _ in d.distances if a in count and b in count]
+        return UnitView(("x", "y", "z", "fixture distance"), ("mm",) * 4,
+                        np.r_[channel, np.full(len(extra), 3)], np.r_[scale, extra],
+                        np.r_[axis, np.full(len(extra), float(rows.mean()))], "measurement")
+
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """The campaign's own train/verify sets; else leave one fixture placement out; else
         the last third in time; else a random third of the poses (per socket)."""
@@ -222,10 +258,12 @@ class StaticArmFamily:
         groups: list[tuple[str, str, str, NDArray[np.float64]]] = []
         for a, axis in enumerate("xyz"):
             groups.append((f"tool {axis}", "all", "all poses", w[:, a]))
-        load = np.abs(self.tau[rows, 1]) + np.abs(self.tau[rows, 3])
+        a, b = self.loaded
+        load = np.abs(self.tau[rows, a]) + np.abs(self.tau[rows, b])
         cut = np.median(load)
-        groups.append(("tool xyz", "regime", "high gravity load (j2+j4)", w[load > cut].ravel()))
-        groups.append(("tool xyz", "regime", "low gravity load (j2+j4)", w[load <= cut].ravel()))
+        joints = f"j{a + 1}+j{b + 1}"
+        groups.append(("tool xyz", "regime", f"high gravity load ({joints})", w[load > cut].ravel()))
+        groups.append(("tool xyz", "regime", f"low gravity load ({joints})", w[load <= cut].ravel()))
         if d.approach is not None:
             for sign, label in ((1.0, "approach from below"), (-1.0, "approach from above")):
                 m = d.approach[rows].sum(axis=1) * sign > 0

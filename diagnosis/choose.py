@@ -14,7 +14,8 @@ from serpar.diagnosis.family import Family
 from serpar.diagnosis.stewart_family import family_from_recording as stewart_family
 from serpar.diagnosis.stewart_motion_effects import MOVING_SHARE, moving_share
 from serpar.diagnosis.stewart_motion_family import family_from_recording as motion_family
-from serpar.errors import IdentificationError
+from serpar.errors import ConfigError, IdentificationError
+from serpar.kinematics.robot import PANDA, Robot
 from serpar.sim import channels as ch
 from serpar.sim.recording import Recording, read_recording
 
@@ -39,14 +40,14 @@ def is_panda_folder(path: Path) -> bool:
                     for f in SOCKET_FILES))
 
 
-def load_for_diagnosis(path: str | Path) -> Recording:
-    """A recording folder, or a panda_1-layout folder converted to one."""
+def load_for_diagnosis(path: str | Path, robot: Robot = PANDA) -> Recording:
+    """A recording folder, or a panda_1-layout folder of ``robot``'s angles converted to one."""
     src = Path(path)
     if not src.exists():
         raise IdentificationError(f"{src} does not exist; expected a recording folder "
                                   "(meta.json + tables) or a panda_1-layout folder")
     if is_panda_folder(src):
-        raw = load_panda_folder(src)
+        raw = load_panda_folder(src, robot)
         return to_recording(panda_folder_data(raw), "real",
                             {"imported_from": f"panda_1 layout: {src}", NOTES: list(raw.notes)})
     return read_recording(src)
@@ -59,15 +60,20 @@ def load_notes(rec: Recording) -> list[str]:
     return [str(n) for n in notes] if isinstance(notes, list) else []
 
 
-def family_from_recording(rec: Recording) -> Family:
+def family_from_recording(rec: Recording, robot: Robot = PANDA) -> Family:
     """The static arm family when the recording has measurements, else the episode family
     for an assembly episode (``serpar run --record``), else the arm-dynamics family when it has
     the arm's joint signals, else a Stewart family when it has Stewart
     leg or platform channels (the motion family when the leg commands change at most samples,
-    the rest-hold family otherwise); else one line saying what is needed."""
+    the rest-hold family otherwise); else one line saying what is needed. ``robot``: the arm
+    of a static recording (another arm than the Panda is refused for every other family)."""
     if rec.measurements is not None and rec.measurements.num_rows > 0:
 
-        return family_from_data(static_data(rec))
+        return family_from_data(static_data(rec, robot))
+    if robot is not PANDA:
+        raise ConfigError(f"--robot {robot.source}: only the static (point/position) diagnosis "
+                          "takes another robot yet; this recording has no measurements table "
+                          "(arm dynamics, episodes and the Stewart platform are the Panda cell's)")
     cols = set(rec.signals.column_names)
     if rec.signals.num_rows > 0 and set(DYNAMICS_CHANNELS) <= cols:
 

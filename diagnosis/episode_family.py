@@ -36,6 +36,7 @@ from serpar.diagnosis.insertion_friction import ChamferSlides, chamfer_slides
 from serpar.diagnosis.locate import locate_rows
 from serpar.diagnosis.residual import consecutive_noise_ratio
 from serpar.diagnosis.stability import default_folds
+from serpar.diagnosis.units import UnitView
 from serpar.errors import IdentificationError
 from serpar.sim.recording import Recording
 
@@ -123,6 +124,21 @@ class EpisodeFamily:
             mine = slides[np.arange(self.slides.n) % len(arm) == f]
             out.append((np.r_[train, np.setdiff1d(slides, mine)], np.r_[held, mine]))
         return out
+
+    def in_units(self, rows: NDArray[np.int64]) -> UnitView:
+        """The arm rows' torque channels (N m), then one entry per chamfer slide: lateral minus
+        the nominal friction ratio times axial force [N] (its measured value: the lateral)."""
+        arm, slide = self._parts(rows)
+        v = self.inner.in_units(self.keep[arm])
+        if self.slides is None or slide.size == 0:
+            return v
+        k = len(v.channels)
+        return UnitView(v.channels + ("chamfer slide lateral - g axial",), v.units + ("N",),
+                        np.r_[v.channel, np.full(slide.size, k)],
+                        np.r_[v.scale, self.slides.sigma(slide)],
+                        np.r_[v.axis, self.slides.time[slide]], v.axis_label,
+                        None if v.measured is None
+                        else np.r_[v.measured, self.slides.lateral[slide]])
 
     def noise_ratio(self, rows: NDArray[np.int64], whitened: Vec) -> tuple[float, str] | None:
         """The arm channels' noise over the stated sigma, from sample-to-sample differences."""

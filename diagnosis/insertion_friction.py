@@ -75,12 +75,20 @@ class ChamferSlides:
         return len(self.time)
 
     def residual(self, d_mu: Vec | None, rows: NDArray[np.int64]) -> Vec:
+        """(lateral - g axial) / its sigma: zero when the slide's force ratio is the model's."""
+        g = self._ratio(d_mu)
+        return (self.lateral[rows] - g * self.axial[rows]) / self.sigma(rows, d_mu)
+
+    def sigma(self, rows: NDArray[np.int64], d_mu: Vec | None = None) -> Vec:
+        """[N] The noise of lateral - g axial."""
+        g = self._ratio(d_mu)
+        return np.sqrt(self.sigma_lateral[rows] ** 2 + (g * self.sigma_axial[rows]) ** 2
+                       + (MODEL_RATIO_SIGMA * self.axial[rows]) ** 2)
+
+    @staticmethod
+    def _ratio(d_mu: Vec | None) -> float:
         mu = NOMINAL_MU + (0.0 if d_mu is None else float(d_mu[0]))
-        g = (1.0 - mu) / (1.0 + mu)
-        lat, ax = self.lateral[rows], self.axial[rows]
-        var = (self.sigma_lateral[rows] ** 2 + (g * self.sigma_axial[rows]) ** 2
-               + (MODEL_RATIO_SIGMA * ax) ** 2)
-        return (lat - g * ax) / np.sqrt(var)
+        return (1.0 - mu) / (1.0 + mu)
 
 
 def _correlation_time(x: Vec, dt: float) -> float:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from serpar.diagnosis.family import LocateRow, export_model_files
+from serpar.diagnosis.report_units import section as units_section
 from serpar.diagnosis.result import Diagnosis
 
 
@@ -112,7 +113,8 @@ td,th{{border:1px solid #ccc;padding:2px 6px}}</style></head><body>
 explained share of the excess held-out residual: {100 * diag.explained:.1f} %.</p>
 <h2>What</h2><ol>{what}</ol>
 <h2>Where</h2><img src="data:image/png;base64,{_where_plot(diag.locate_before, diag.locate_after)}">{where}
-<h2>Held-out residual before and after</h2><img src="data:image/png;base64,{_heldout_plot(diag)}">
+{units_section(diag.physical, _png)}
+<h2>Held-out residual before and after (whitened)</h2><img src="data:image/png;base64,{_heldout_plot(diag)}">
 <h2>Evidence: every candidate tried</h2>{cands}
 <p>Updated model: <code>{html.escape(model_path.name)}</code>{_exported(exported)}</p></body></html>"""
     out.write_text(doc)

@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 from serpar.diagnosis.empirical import EmpiricalTerm
 from serpar.diagnosis.family import LocateRow
 from serpar.diagnosis.residual import ResidualCheck
+from serpar.diagnosis.units import PhysicalResidual
 
 NO_MISSING_PHYSICS = "no missing physics found beyond noise"
 
@@ -125,6 +126,8 @@ class Diagnosis:
     empirical: EmpiricalTerm | None = None
     """What is left, characterised over the family's basis library (None: not tried: the
     residual passed the noise test, looked like noise, or the family has no library)."""
+    physical: PhysicalResidual | None = None
+    """The held-out residual in physical units per channel (None: the family cannot say)."""
 
     @property
     def established(self) -> tuple[Finding, ...]:
@@ -159,4 +162,5 @@ class Diagnosis:
                 "suspected": [f.effect for f in self.suspected],
                 "residual_check": None if self.residual is None else self.residual.as_dict(),
                 "empirical": None if self.empirical is None else self.empirical.as_dict(),
+                "heldout_rms_physical": None if self.physical is None else self.physical.as_dict(),
                 "model": self.model}

@@ -32,7 +32,7 @@ from serpar.diagnosis.empirical_refit import model_refit, outweighed
 from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.fit import Fit, blocks_of, earns, fit_model
 from serpar.diagnosis.locate import chi2_p
-from serpar.diagnosis.residual import check_residual
+from serpar.diagnosis.residual import ResidualCheck, check_residual
 from serpar.diagnosis.result import (
     NO_MISSING_PHYSICS,
     CandidateScore,
@@ -50,6 +50,7 @@ from serpar.diagnosis.stability import (
     fit_identified,
     folds,
 )
+from serpar.diagnosis.units import in_units
 from serpar.errors import IdentificationError
 
 Progress = Callable[[str], None]
@@ -172,7 +173,10 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
     residual = check_residual(family, heldout, after, cfg.alpha)
     empirical = None
     library = getattr(family, "empirical_library", None)
-    if callable(library) and not residual.passes and residual.structured is not False:
+    # tried also on a residual that looks like noise: sharp physics (friction at reversals)
+    # inflates the sample-to-sample noise estimate, and only a term that explains part of it
+    # tells the two apart (noise_like_but_explained below)
+    if callable(library) and not residual.passes:
         if report:
             report("characterising what is left")
         n_channels = after.size // max(heldout.size, 1)
@@ -195,6 +199,8 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
             empirical = characterise(groups, model_refit(family, kept, fixed, groups,
                                                          n_channels),
                                      train, heldout, splits, n_channels, every)
+    if residual.structured is False and empirical is not None:
+        residual, empirical = noise_like_but_explained(residual, empirical)
     verdict = _verdict(findings, base, cfg, residual.words, empirical)
     baseline = (_estimates(family, kept, family.baseline.name)
                 if family.baseline is not None else ())
@@ -216,7 +222,25 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
                **({"empirical": [t.as_dict() for t in empirical.terms]}
                   if empirical is not None and empirical.terms else {})},
         heldout_before=before, heldout_after=after, heldout_rows=heldout, residual=residual,
-        empirical=empirical)
+        empirical=empirical, physical=in_units(family, heldout, before, after))
+
+
+NOISE_EXPLAINED = 0.8
+"""An empirical term that takes a noise-like residual's held-out RMS below this share of it
+shows structure: a stated sigma too small by a factor cannot be fitted away on held-out data."""
+
+
+def noise_like_but_explained(residual: ResidualCheck, empirical: EmpiricalTerm
+                             ) -> tuple[ResidualCheck, EmpiricalTerm | None]:
+    """A residual the noise estimate called noise: structure after all when an empirical term
+    explains a material part of it (the estimate was inflated by it); else noise, no term."""
+    if not empirical.terms or empirical.heldout_rms_after >= NOISE_EXPLAINED * residual.rms:
+        return residual, None
+    words = (f"a structured residual remains: {residual.rms:.2g} x the stated sigma; the data's "
+             f"own noise estimate ({residual.noise_method}: {residual.noise_ratio:.2g} x) "
+             "is inflated by it, since an empirical term removes part of it on held-out data; "
+             "physics that no candidate explains")
+    return replace(residual, structured=True, words=words), empirical
 
 
 def _shares(family: Family, path: list[Fit], heldout: Rows) -> dict[str, tuple[float, float]]:

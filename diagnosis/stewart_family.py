@@ -39,6 +39,7 @@ from serpar.diagnosis.stewart_effects import (
     geometry_flat_index,
 )
 from serpar.diagnosis.stewart_empirical import stewart_library
+from serpar.diagnosis.units import UnitView, pose_view
 from serpar.errors import IdentificationError
 from serpar.sim.recording import Recording
 from serpar.sim.stewart import StewartConfig
@@ -203,6 +204,10 @@ class StewartFamily:
         if not (np.isfinite(s) and self.h.sigma_pos > 0):
             return None
         return s / self.h.sigma_pos, "scatter of the samples within each rest hold"
+
+    def in_units(self, rows: NDArray[np.int64]) -> UnitView:
+        """Each hold's platform pose (mm, mrad), measured against the model's."""
+        return pose_view(self.h.time[rows], "time [s]", self.sigma[rows], self.h.pos[rows])
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """The first 60 % of the holds in time train, the last 40 % are held out."""

@@ -49,6 +49,7 @@ from serpar.diagnosis.stewart_motion_effects import (
     nominal_track,
     read_motion,
 )
+from serpar.diagnosis.units import UnitView, pose_view
 from serpar.errors import IdentificationError
 from serpar.sim.recording import Recording
 from serpar.sim.stewart import StewartConfig
@@ -199,6 +200,11 @@ class StewartMotionFamily:
         """The data's noise over the stated sigma, from sample-to-sample differences."""
         r = consecutive_noise_ratio(rows, whitened, 12)
         return None if r is None else (r, "sample-to-sample differences")
+
+    def in_units(self, rows: NDArray[np.int64]) -> UnitView:
+        """The platform pose (mm, mrad) and each leg's tracking (mm), per sample."""
+        s = self.s
+        return pose_view(s.time[rows], "time [s]", self.sigma[rows], s.pos[rows], s.legs[rows])
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """The first 60 % of the samples in time train, the last 40 % are held out."""

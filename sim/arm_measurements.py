@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from serpar.errors import IdentificationError
-from serpar.sim.arm import N_JOINTS, Q_MAX, Q_MIN
+from serpar.kinematics.robot import PANDA, Robot
 
 JOINT_LIMIT_TOL = 1e-3
 """Joint angles may exceed the datasheet range by this much [rad] (encoder resolution)."""
@@ -38,23 +38,30 @@ def _array(name: str, value: object, shape: tuple[int, ...]) -> NDArray[np.float
     return a
 
 
-def _check_joints(q: object, tau: object | None) -> int:
+def _check_joints(q: object, tau: object | None, robot: Robot) -> int:
+    if not isinstance(robot, Robot):
+        raise IdentificationError("a measurement set's robot must be an "
+                                  "serpar.kinematics.robot.Robot (default: the Panda)")
     a = np.asarray(q, dtype=float)
-    if a.ndim != 2 or a.shape[1] != N_JOINTS:
-        raise IdentificationError(f"q has shape {a.shape}, expected (N, {N_JOINTS}) joint angles")
+    n_j = robot.n_joints
+    if a.ndim != 2 or a.shape[1] != n_j:
+        raise IdentificationError(f"q has shape {a.shape}, expected (N, {n_j}) joint angles "
+                                  f"of {robot.label}")
     n = a.shape[0]
     if n == 0:
         raise IdentificationError("the measurement set has no poses")
-    a = _array("q", a, (n, N_JOINTS))
-    lo, hi = np.asarray(Q_MIN) - JOINT_LIMIT_TOL, np.asarray(Q_MAX) + JOINT_LIMIT_TOL
+    a = _array("q", a, (n, n_j))
+    q_min, q_max = robot.q_min, robot.q_max
+    lo, hi = np.asarray(q_min) - JOINT_LIMIT_TOL, np.asarray(q_max) + JOINT_LIMIT_TOL
     out = np.argwhere((a < lo) | (a > hi))
     if out.size:
         k, j = (int(v) for v in out[0])
         raise IdentificationError(
             f"q of pose {k}: joint {j + 1} at {a[k, j]:.4f} rad is outside its range "
-            f"[{Q_MIN[j]}, {Q_MAX[j]}] rad ({len(out)} value(s) out of range; radians expected)")
+            f"{q_min[j]:.4g}..{q_max[j]:.4g} rad of {robot.label} ({len(out)} value(s) out of "
+            "range; radians expected)")
     if tau is not None:
-        _array("tau_gravity", tau, (n, N_JOINTS))
+        _array("tau_gravity", tau, (n, n_j))
     return n
 
 
@@ -82,9 +89,11 @@ class PositionSet:
     sigma: float = 15e-6
     """Tracker noise per axis [m] (Leica AT901-B, seed 003 §7.1)."""
     tau_gravity: NDArray[np.float64] | None = None
+    robot: Robot = PANDA
+    """The arm whose joint count and limits the angles are checked against."""
 
     def __post_init__(self) -> None:
-        n = _check_joints(self.q, self.tau_gravity)
+        n = _check_joints(self.q, self.tau_gravity, self.robot)
         _check_points("position", self.position, n)
         _check_sigma(sigma=self.sigma)
 
@@ -104,9 +113,11 @@ class PoseSet:
     sigma_rotation: float = 50e-6
     """Orientation noise per axis [rad]."""
     tau_gravity: NDArray[np.float64] | None = None
+    robot: Robot = PANDA
+    """The arm whose joint count and limits the angles are checked against."""
 
     def __post_init__(self) -> None:
-        n = _check_joints(self.q, self.tau_gravity)
+        n = _check_joints(self.q, self.tau_gravity, self.robot)
         _check_points("position", self.position, n)
         r = _array("rotation", self.rotation, (n, 3, 3))
         ortho = np.abs(r @ r.transpose(0, 2, 1) - np.eye(3)).max(axis=(1, 2))
@@ -133,9 +144,11 @@ class PointSet:
     sigma_distance: float = 50e-6
     """Uncertainty of a fixture distance [m]."""
     tau_gravity: NDArray[np.float64] | None = None
+    robot: Robot = PANDA
+    """The arm whose joint count and limits the angles are checked against."""
 
     def __post_init__(self) -> None:
-        n = _check_joints(self.q, self.tau_gravity)
+        n = _check_joints(self.q, self.tau_gravity, self.robot)
         ids = np.asarray(self.point)
         if ids.shape != (n,) or not np.issubdtype(ids.dtype, np.integer):
             raise IdentificationError(f"point must be {n} integer socket ids, got shape "

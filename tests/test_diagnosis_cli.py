@@ -25,7 +25,8 @@ def test_twin_then_diagnose_with_report(tmp_path, capsys) -> None:
     assert main(["diagnose", str(out), "--json", "--report", str(report)]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["top_effect"] == "thermal_drift"
-    assert report.read_text().count("data:image/png;base64") == 2
+    text = report.read_text()  # where, held-out whitened, and the fit in mm: traces, residuals
+    assert text.count("data:image/png;base64") == 4 and "Held-out fit in physical units" in text
     model = json.loads(Path(result["model_file"]).read_text())
     assert model["effects"] == ["thermal_drift"]
 
