@@ -126,7 +126,8 @@ def _read_csv(path: Path, robot: Robot) -> NDArray[np.float64]:
                 raise IdentificationError(f"{path} line {line_no}: empty row")
             if len(row) != robot.n_joints:
                 raise IdentificationError(f"{path} line {line_no}: expected {robot.n_joints} "
-                                          f"joint angles ({robot.label}), got {len(row)} values")
+                                          f"joint angles ({robot.label}), got {len(row)} values"
+                                          f"{robot.other_arm_hint}")
             try:
                 values = [float(c) for c in row]
             except ValueError:

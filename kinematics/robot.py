@@ -84,6 +84,11 @@ class Robot:
         """How messages name the arm: ``panda`` or ``iiwa14 (from FILE)``."""
         return self.name if self.source == "built-in" else f"{self.name} (from {self.source})"
 
+    @property
+    def other_arm_hint(self) -> str:
+        """What a message about a mismatch adds for the default arm: the data may be another's."""
+        return "; another arm: give its URDF/MJCF with --robot FILE" if self.source == "built-in" else ""
+
     def chain(self, tool_offset: Sequence[float] = (0.0, 0.0, 0.0)) -> Chain:
         """The MD-H(+beta) chain with its tool point ``tool_offset`` [m] in the flange frame:
         base (6), five parameters per joint, tool (6), named like

@@ -59,7 +59,7 @@ def _check_joints(q: object, tau: object | None, robot: Robot) -> int:
         raise IdentificationError(
             f"q of pose {k}: joint {j + 1} at {a[k, j]:.4f} rad is outside its range "
             f"{q_min[j]:.4g}..{q_max[j]:.4g} rad of {robot.label} ({len(out)} value(s) out of "
-            "range; radians expected)")
+            f"range; radians expected{robot.other_arm_hint})")
     if tau is not None:
         _array("tau_gravity", tau, (n, n_j))
     return n

@@ -139,7 +139,8 @@ def test_six_joint_point_file_needs_a_six_joint_robot(tmp_path) -> None:
     ur5e = load_robot(UR5E)
     data = load_panda_folder(tmp_path, ur5e)
     assert data.point_set(("front",)).q.shape == (8, 6)
-    with pytest.raises(IdentificationError, match=r"expected 7 joint angles \(panda\), got 6"):
+    with pytest.raises(IdentificationError, match=r"expected 7 joint angles \(panda\), got 6 "
+                       r"values; another arm: give its URDF/MJCF with --robot FILE"):
         load_panda_folder(tmp_path)
 
 
@@ -151,7 +152,7 @@ def test_out_of_range_angle_names_the_robot() -> None:
         PositionSet(q, np.full((3, 3), 0.5), robot=iiwa)
     msg = str(err.value)
     assert "pose 1: joint 6 at 3.9000 rad is outside its range -2.094..2.094 rad of iiwa14 (from " in msg
-    assert IIWA in msg
+    assert IIWA in msg and "--robot" not in msg  # the arm is named: no hint
 
 
 @pytest.mark.parametrize("path", [IIWA, UR5E])
