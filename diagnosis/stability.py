@@ -16,10 +16,11 @@ An effect the forward selection kept is *established* only when
 - where the residual has parallel channels (a family's ``channels``, e.g. the torque of each
   joint), what it changes in each channel is what that channel's held-out residual shows: in
   at least ``MIN_CHANNEL_SHARE`` of the channels it changes materially (by
-  ``MATERIAL_CORRECTION`` sigma RMS or more) it removes at least ``MIN_MATCH`` of the square
-  of its own change (an effect the data hold removes all of it, up to noise). A latency that
-  stands in for friction near standstill moves every joint's command by a few sigma and
-  removes 5-50 % of that on most of them.
+  ``MATERIAL_CORRECTION`` sigma RMS or more), the channel's own best scale of the change
+  (least squares of the residual without it on its change) lies within ``MATCH_RANGE``: 1 up to
+  noise for an effect the data hold. A latency that stands in for friction near standstill
+  moves every joint's command by a few sigma; some joints want a third of that delay, others
+  twice or three times it.
 
 Uncertainties are the larger of the local (Jacobian) one and the spread over the folds.
 Everything else the selection kept is "suspected, not established", with the reasons.
@@ -48,7 +49,7 @@ MIN_AGREEMENT = 0.8
 """Cosine between an effect's contribution on a fold and on the main fit, on every fold where
 it is needed."""
 MIN_CHANNEL_SHARE = 0.8
-MIN_MATCH = 0.5
+MATCH_RANGE = (0.75, 2.0)
 MATERIAL_CORRECTION = 1.0
 """[sigma, RMS over the held-out rows] A channel the effect changes by less is not judged."""
 UNIDENTIFIED = 0.25
@@ -192,11 +193,13 @@ def channel_check(family: Family, params: Mapping[str, NDArray[np.float64]], nam
     if with_it.size != n * len(heldout):
         return None
     a, b = with_it.reshape(-1, n), without.reshape(-1, n)
-    change = np.mean((a - b) ** 2, axis=0)
-    gain = np.mean(b**2, axis=0) - np.mean(a**2, axis=0)
-    material = np.flatnonzero(change >= MATERIAL_CORRECTION**2)
+    change = b - a  # what the effect removes from each channel's residual
+    power = np.mean(change**2, axis=0)
+    scale = np.mean(b * change, axis=0) / np.maximum(power, 1e-300)  # the channel's own fit
+    material = np.flatnonzero(power >= MATERIAL_CORRECTION**2)
+    lo, hi = MATCH_RANGE
     return ChannelCheck(tuple(channels[i] for i in material),
-                        tuple(channels[i] for i in material if gain[i] >= MIN_MATCH * change[i]))
+                        tuple(channels[i] for i in material if lo <= scale[i] <= hi))
 
 
 def _cosine(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
@@ -228,7 +231,8 @@ def reasons_not_established(effect: Effect, values: NDArray[np.float64],
         off = [c for c in channels.material if c not in channels.matching]
         why.append(f"of the {len(channels.material)} channels it changes, the residual shows "
                    f"that change in {len(channels.matching)} only (not in {', '.join(off[:4])}"
-                   f"{' ...' if len(off) > 4 else ''}): it stands in for something else")
+                   f"{' ...' if len(off) > 4 else ''}, whose residual holds under {MATCH_RANGE[0]:g}x "
+                   f"or over {MATCH_RANGE[1]:g}x of it): it stands in for something else")
     if share_of_remaining < MIN_SHARE_OF_REMAINING:
         why.append(f"explains only {100 * share_of_remaining:.2g} % of what the effects "
                    "before it left")
