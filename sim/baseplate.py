@@ -47,7 +47,8 @@ class BaseplateConfig:
         if self.thickness < 3e-3:
             raise ConfigError(f"thickness {self.thickness} m: holes must be at least 3 mm deep")
         if not 0 <= self.chamfer <= 5e-4:
-            raise ConfigError(f"chamfer {self.chamfer} m outside the valid range 0..0.5 mm")
+            raise ConfigError(f"chamfer {self.chamfer:g} m ({self.chamfer * 1e3:g} mm) outside 0..0.0005 m "
+                              "(0..0.5 mm); lengths in a config are in metres")
         if not 2 * self.window + 1e-3 < self.pitch:
             raise ConfigError("window too large for the pitch: holes would merge")
 

@@ -47,7 +47,8 @@ class CheckerboardConfig:
             raise ConfigError(f"board squares {self.squares}: need >= 3 each way and one even, one odd "
                               "count (so the pattern's orientation is unambiguous)")
         if not 1e-3 <= self.square <= 0.05:
-            raise ConfigError(f"board square {self.square} m: valid 1..50 mm")
+            raise ConfigError(f"board square {self.square:g} m ({self.square * 1e3:g} mm): valid 0.001..0.05 m "
+                              "(1..50 mm); lengths in a config are in metres")
 
     @property
     def inner_corners(self) -> tuple[int, int]:

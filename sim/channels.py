@@ -3,6 +3,7 @@ writer and reader of a recording takes them from. libfranka's names where one ex
 
 from __future__ import annotations
 
+import math
 import re
 
 
@@ -55,6 +56,27 @@ APPROACH = numbered("approach", 7)
 MEASUREMENT_REQUIRED = (*Q, "kind")
 MEASUREMENT_OPTIONAL = ("x", "y", "z", "socket", "time", "set", "placement", *APPROACH)
 MEASUREMENT_HELP = "q1..q7, kind, x/y/z (position), socket (point), time, approach1..7, set, placement"
+
+
+_TAU_MAX = (500.0, "N m")
+_LENGTH_MAX = (5.0, "m")
+_QUAT_MAX = (1.01, "(unit quaternion)")
+PLAUSIBLE_MAX: dict[str, tuple[float, str]] = {
+    **dict.fromkeys(Q, (2 * math.pi + 0.1, "rad")), **dict.fromkeys(DQ, (20.0, "rad/s")),
+    **dict.fromkeys(TAU_J, _TAU_MAX), **dict.fromkeys(TAU_J_D, _TAU_MAX),
+    **dict.fromkeys(F_EXT, (1e4, "N or N m")), **dict.fromkeys(TCP_POSITION, _LENGTH_MAX),
+    **dict.fromkeys(TCP_QUAT, _QUAT_MAX), **dict.fromkeys(LEG_CMD, (2.0, "m")),
+    **dict.fromkeys(LEG, (2.0, "m")), **dict.fromkeys(PLATFORM_POSITION, _LENGTH_MAX),
+    **dict.fromkeys(PLATFORM_QUAT, _QUAT_MAX), GRIPPER_WIDTH: (1.0, "m"),
+    **dict.fromkeys(CONTACT_FORCE, (1e5, "N")), **dict.fromkeys(("x", "y", "z"), _LENGTH_MAX),
+}
+"""Largest magnitude a robot can report per channel (and measurement column) in SI units:
+beyond it the unit is wrong (degrees, millimetres) or the value corrupt."""
+
+
+def plausible_max(name: str) -> tuple[float, str] | None:
+    """(largest plausible |value|, unit) of a channel, None where the schema sets no bound."""
+    return PLAUSIBLE_MAX.get(name)
 
 
 def is_channel(name: str) -> bool:

@@ -10,6 +10,7 @@ from typing import Any, TypeVar
 import yaml
 
 from serpar.errors import ConfigError
+from serpar.sim.config_types import convert
 
 T = TypeVar("T")
 
@@ -19,23 +20,21 @@ def from_dict(cls: type[T], values: dict[str, Any], where: str = "config") -> T:
     if not isinstance(values, dict):
         raise ConfigError(f"{where}: expected a mapping, got {type(values).__name__}")
     fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    unknown = sorted(set(values) - set(fields))
+    unknown = sorted(k if isinstance(k, str) and k.isidentifier() else repr(k)
+                     for k in set(values) - set(fields))
     if unknown:
         raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; valid: {', '.join(fields)}")
     hints = typing.get_type_hints(cls)
-    kwargs: dict[str, Any] = {}
-    for name, raw in values.items():
-        hint = hints[name]
-        if dataclasses.is_dataclass(hint) and isinstance(raw, dict):
-            kwargs[name] = from_dict(hint, raw, f"{where}.{name}")  # type: ignore[arg-type]
-        elif isinstance(raw, list):
-            kwargs[name] = tuple(tuple(v) if isinstance(v, list) else v for v in raw)
-        else:
-            kwargs[name] = raw
+    kwargs = {name: convert(hints[name], raw, _key(where, name), from_dict) for name, raw in values.items()}
     try:
         return cls(**kwargs)
     except TypeError as exc:
         raise ConfigError(f"{where}: {exc}") from None
+
+
+def _key(where: str, name: str) -> str:
+    """"run.yaml" + "holes" -> "run.yaml: holes"; "run.yaml: stewart" + "stroke" -> "run.yaml: stewart.stroke"."""
+    return f"{where}.{name}" if ": " in where else f"{where}: {name}"
 
 
 def load_yaml_config(cls: type[T], path: str | Path) -> T:
@@ -44,8 +43,16 @@ def load_yaml_config(cls: type[T], path: str | Path) -> T:
     if not p.is_file():
         raise ConfigError(f"config file {p} not found")
     try:
-        values = yaml.safe_load(p.read_text()) or {}
-    except yaml.YAMLError as exc:
+        values = yaml.safe_load(p.read_text())
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        raise ConfigError(f"config file {p} is not valid YAML{where}: {exc.problem or exc.context}") from None
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else "parse error"
         raise ConfigError(f"config file {p} is not valid YAML: {first}") from None
-    return from_dict(cls, values, where=p.name)
+    try:
+        return from_dict(cls, {} if values is None else values, where=p.name)
+    except ConfigError as exc:  # a range check of the dataclass names no file: add it
+        message = str(exc)
+        raise ConfigError(message if message.startswith(p.name) else f"{p.name}: {message}") from None

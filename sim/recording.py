@@ -9,6 +9,7 @@ it knows nothing about where the numbers came from.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -18,7 +19,7 @@ import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from serpar.errors import SerparError
-from serpar.sim.channels import KNOWN_HELP, TIME, is_channel
+from serpar.sim.channels import KNOWN_HELP, PHASE, TIME, is_channel, plausible_max
 
 SCHEMA_VERSION = 1
 SOURCES = ("sim", "real")
@@ -77,16 +78,35 @@ class RecordingMeta:
         return d
 
     @classmethod
-    def from_json(cls, d: dict) -> RecordingMeta:
+    def from_json(cls, d: object) -> RecordingMeta:
+        if not isinstance(d, dict):
+            raise RecordingError(f"meta.json: expected a JSON object, got {type(d).__name__}")
         try:
-            phases = tuple(PhaseSegment(**p) for p in d.get("phases", []))
-            return cls(source=d["source"], sample_rate_hz=float(d["sample_rate_hz"]),
-                       channels=tuple(d["channels"]), noise_sigma=dict(d.get("noise_sigma", {})),
+            channels = d["channels"]
+            if not isinstance(channels, list) or not all(isinstance(c, str) for c in channels):
+                raise RecordingError("meta.json: channels must be a list of channel names")
+            phases = tuple(PhaseSegment(str(p["name"]), _number(p["start"], "phase start"),
+                                        _number(p["end"], "phase end")) for p in d.get("phases", []))
+            sigma = {str(k): _number(v, f"noise_sigma[{k}]") for k, v in dict(d.get("noise_sigma", {})).items()}
+            bad = [k for k, v in sigma.items() if not v > 0]
+            if bad:
+                raise RecordingError(f"meta.json: noise_sigma of {', '.join(bad)} must be > 0")
+            return cls(source=d["source"], sample_rate_hz=_number(d["sample_rate_hz"], "sample_rate_hz"),
+                       channels=tuple(channels), noise_sigma=sigma,
                        phases=phases, model=dict(d.get("model", {})),
                        schema_version=int(d.get("schema_version", -1)), units=d.get("units", "SI"))
-        except (KeyError, TypeError) as exc:
+        except (KeyError, TypeError, ValueError) as exc:
+            if isinstance(exc, RecordingError):
+                raise
             raise RecordingError(f"meta.json: missing or malformed field ({exc}); needs source, "
                                  "sample_rate_hz, channels") from None
+
+
+def _number(value: object, what: str) -> float:
+    """A finite JSON number (a string or boolean is not one)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise RecordingError(f"meta.json: {what} must be a finite number, got {value!r}")
+    return float(value)
 
 
 def check_channels(channels: tuple[str, ...] | list[str]) -> None:
@@ -154,19 +174,26 @@ def read_recording(folder: str | Path) -> Recording:
         meta = RecordingMeta.from_json(json.loads((src / "meta.json").read_text()))
     except json.JSONDecodeError as exc:
         raise RecordingError(f"{src / 'meta.json'} is not valid JSON: {exc.msg} (line {exc.lineno})") from None
+    except UnicodeDecodeError:
+        raise RecordingError(f"{src / 'meta.json'} is not text (UTF-8 JSON)") from None
     tables: dict[str, pa.Table | None] = {}
     for name in TABLES:
         parquet, csv = src / f"{name}.parquet", src / f"{name}.csv"
-        if parquet.is_file():
-            tables[name] = pq.read_table(parquet)
-        elif csv.is_file():
-            tables[name] = pacsv.read_csv(csv)
-        else:
-            tables[name] = None
+        path = parquet if parquet.is_file() else csv if csv.is_file() else None
+        tables[name] = None if path is None else _read_table(path)
     if tables["signals"] is None:
         raise RecordingError(f"{src} has no signals.parquet or signals.csv")
     _check_signals(meta, tables["signals"])
     return Recording(meta, tables["signals"], tables["measurements"])
+
+
+def _read_table(path: Path) -> pa.Table:
+    try:
+        return pq.read_table(path) if path.suffix == ".parquet" else pacsv.read_csv(path)
+    except (pa.ArrowException, OSError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        kind = "Parquet" if path.suffix == ".parquet" else "CSV"
+        raise RecordingError(f"{path} is not a readable {kind} table (truncated or corrupt?): {first}") from None
 
 
 def _check_signals(meta: RecordingMeta, signals: pa.Table) -> None:
@@ -176,7 +203,24 @@ def _check_signals(meta: RecordingMeta, signals: pa.Table) -> None:
         extra = sorted(set(cols) - set(meta.channels))
         raise RecordingError(f"signals columns differ from meta.json channels (missing: {', '.join(missing) or '-'}; "
                              f"not in meta: {', '.join(extra) or '-'})")
-    t = signals.column("time").to_numpy()
+    for name in cols:
+        if name == PHASE:
+            continue
+        kind = signals.schema.field(name).type
+        if not (pa.types.is_floating(kind) or pa.types.is_integer(kind)) or pa.types.is_boolean(kind):
+            raise RecordingError(f"channel {name} holds {kind} values; the signals are numbers (SI units)")
+        values = signals.column(name).to_numpy(zero_copy_only=False).astype(float)
+        finite = np.isfinite(values)
+        if not finite.all():
+            row = int(np.flatnonzero(~finite)[0])
+            raise RecordingError(f"channel {name} has {int((~finite).sum())} missing or non-finite values "
+                                 f"(first at row {row}); `serpar import` fills isolated gaps on the grid")
+        bound = plausible_max(name)
+        if bound is not None and values.size and float(np.max(np.abs(values))) > bound[0]:
+            row = int(np.argmax(np.abs(values)))
+            raise RecordingError(f"channel {name} reaches {values[row]:g} at row {row}, beyond any plausible "
+                                 f"value in {bound[1]} (|x| <= {bound[0]:g}): wrong units or a corrupt value")
+    t = signals.column("time").to_numpy(zero_copy_only=False)
     if len(t) > 1 and not np.all(np.diff(t) > 0):
         raise RecordingError("time must increase strictly")
 

@@ -60,8 +60,8 @@ class SceneConfig:
     replaces ``arm_joint_friction``."""
 
     def __post_init__(self) -> None:
-        if not isinstance(self.seed, int) or isinstance(self.seed, bool):
-            raise ConfigError(f"seed must be an integer, got {self.seed!r}")
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            raise ConfigError(f"seed must be a non-negative integer, got {self.seed!r}")
         friction = self.arm_joint_friction
         if friction and (len(friction) != len(JOINT_NAMES) or not all(0 <= f <= 20 for f in friction)):
             raise ConfigError(f"arm_joint_friction {friction}: () or {len(JOINT_NAMES)} values in 0..20 N m")

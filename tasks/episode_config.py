@@ -102,8 +102,8 @@ class EpisodeConfig:
     a concealed effect for the diagnosis of insertions (diagnosis/insertion_friction.py)."""
 
     def __post_init__(self) -> None:
-        if not isinstance(self.seed, int) or isinstance(self.seed, bool):
-            raise ConfigError(f"seed must be an integer, got {self.seed!r}")
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            raise ConfigError(f"seed must be a non-negative integer, got {self.seed!r}")
         if isinstance(self.holes, int):
             if not 1 <= self.holes <= N_HOLES:
                 raise ConfigError(f"holes={self.holes}: a count in 1..{N_HOLES} or a list of hole indices")

@@ -1,8 +1,17 @@
 # MuJoCo picks its GL backend when first imported and tests import mujoco directly:
 # importing serpar first applies the package's headless default (MUJOCO_GL=egl when unset).
+import os
+
 import pytest
+from hypothesis import settings
 
 import serpar  # noqa: F401
+
+# The fuzz tests draw the same examples on every run (CI must not go red by chance); set
+# HYPOTHESIS_PROFILE=explore to draw fresh ones.
+settings.register_profile("ci", derandomize=True, database=None, deadline=None)
+settings.register_profile("explore", deadline=None)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 @pytest.fixture(scope="session")

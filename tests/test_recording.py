@@ -27,7 +27,7 @@ def _recording(n: int = 500) -> Recording:
     rng = np.random.default_rng(0)
     rec = SignalRecorder(CHANNELS, capacity=64)  # grows past its first capacity
     for k in range(n):
-        row: dict[str, float | str] = {c: float(rng.normal()) for c in CHANNELS}
+        row: dict[str, float | str] = {c: float(rng.normal(scale=0.3)) for c in CHANNELS}
         row["time"] = k * 1e-3
         row["phase"] = "approach" if k < 200 else "insert"
         rec.append(row)

@@ -29,6 +29,7 @@ from serpar.sim.channels import (
     MEASUREMENT_REQUIRED,
     TIME,
     is_channel,
+    plausible_max,
 )
 from serpar.sim.importers.grid import GridRepair, on_grid
 from serpar.sim.importers.tables import RawTable
@@ -37,10 +38,6 @@ from serpar.sim.recording import Recording, RecordingError, RecordingMeta, check
 TABLES = ("signals", "measurements")
 MAX_BAD_FRACTION = 0.01
 STRING_CHANNELS = ("phase", "kind", "set", "placement")
-SCALE_LIMITS = {"q": (2 * math.pi + 0.1, "rad"), "dq": (20.0, "rad/s"),
-                "tau_J": (500.0, "N m"), "tau_J_d": (500.0, "N m"), "leg": (2.0, "m"),
-                "x": (5.0, "m"), "y": (5.0, "m"), "z": (5.0, "m")}
-"""Largest plausible magnitude per channel family: beyond it the unit is wrong."""
 
 
 @dataclass(frozen=True)
@@ -100,10 +97,6 @@ def expand_map(mapping: dict[str, str], names: list[str]) -> dict[str, str]:
     return out
 
 
-def _family(channel: str) -> str:
-    return channel.rstrip("0123456789").rstrip("_") if channel not in "xyz" else channel
-
-
 def _numbers(raw: RawTable, chan: str, col: str, bad: dict[int, str]) -> NDArray[np.float64]:
     values = raw.columns[col]
     if values.dtype != object:
@@ -139,9 +132,9 @@ def _check_bad(raw: RawTable, bad: dict[int, str]) -> None:
 
 def _check_scale(arrays: dict[str, NDArray]) -> None:
     for chan, v in arrays.items():
-        fam = _family(chan)
-        if fam in SCALE_LIMITS and v.dtype != object and v.size:
-            limit, unit = SCALE_LIMITS[fam]
+        bound = plausible_max(chan)
+        if bound is not None and v.dtype != object and v.size:
+            limit, unit = bound
             peak = float(np.max(np.abs(v)))
             if peak > limit:
                 raise RecordingError(f"channel {chan} reaches {peak:g}, beyond any plausible "
