@@ -9,16 +9,27 @@ them; bodies welded to the world get one static pose.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 
+from serpar.sim import channels as ch
+
+APP_ID = "serpar"
+"""The rerun application id of every serpar recording (a blueprint applies to one id)."""
 TIMELINE = "sim_time"
 ROOT = "cell"
 IMAGE_WIDTH = 512
 """Camera frames are block-averaged down to at most this width (and JPEG-compressed)."""
+PINHOLE, IMAGE = "pinhole", "image"
+"""A camera's entity holds its pose, the child PINHOLE its intrinsics, PINHOLE/IMAGE its frames."""
+EYE, LOOK_AT = (1.19, 0.706, 0.727), (0.42, 0.06, 0.28)
+"""The 3-D view's first eye: the direction of `serpar render`'s overview camera (sim/render.py:
+azimuth -140 deg, elevation -24 deg), 1.1 m from its look-at point instead of 1.55 m."""
 _G = mujoco.mjtGeom
 _SUFFIX = re.compile(r"(\d+|_(x|y|z|qw|qx|qy|qz))$")
 
@@ -35,7 +46,7 @@ def body_path(model: mujoco.MjModel, body: int) -> str:
 def open_stream(path: Path, name: str) -> rr.RecordingStream:
     """A stream into `path` only. Its id is random (the viewer merges recordings that share
     one); `name` is what the viewer lists."""
-    rec = rr.RecordingStream("serpar")
+    rec = rr.RecordingStream(APP_ID)
     rec.save(path)
     rec.send_recording_name(name)
     return rec
@@ -146,19 +157,31 @@ def downscale(image: np.ndarray, width: int = IMAGE_WIDTH) -> np.ndarray:
     return np.rint(blocks).astype(np.uint8).reshape(h // k, w // k, *image.shape[2:])
 
 
+def camera_path(name: str) -> str:
+    """The camera's posed entity; its pinhole is the child ``PINHOLE`` and its frames below that."""
+    return f"{ROOT}/cameras/{name}"
+
+
 def log_frames(rec: rr.RecordingStream, model: mujoco.MjModel, data: mujoco.MjData,
                frames: dict[str, np.ndarray], t: float) -> None:
-    """Each frame (downscaled, JPEG) under its camera, posed where the camera is now."""
+    """Each frame (downscaled, JPEG) under its camera, posed where the camera is now.
+
+    Three entities per camera: the pose on ``cameras/<name>``, the pinhole on its child and the
+    image below the pinhole. rerun 0.41 draws an image in a 2-D view only when it lies *below*
+    a pinhole entity: logged on the pinhole's own entity (as before) the camera views were a
+    grey box in the viewer, JPEG or raw alike. Its Pinhole docs also say a Transform3D on the
+    pinhole's entity takes precedence over the Pinhole, so the pose stays one level up."""
     rec.set_time(TIMELINE, duration=t)
     for name, image in frames.items():
         cam = model.camera(name).id
         small = downscale(image)
-        path = f"{ROOT}/cameras/{name}"
+        h, w = small.shape[:2]
+        path = camera_path(name)
         rec.log(path, rr.Transform3D(translation=data.cam_xpos[cam], mat3x3=data.cam_xmat[cam].reshape(3, 3)))
-        rec.log(path, rr.Pinhole(fov_y=np.radians(model.cam_fovy[cam]), aspect_ratio=small.shape[1] / small.shape[0],
-                                 resolution=[small.shape[1], small.shape[0]], camera_xyz=rr.ViewCoordinates.RUB,
-                                 image_plane_distance=0.05))
-        rec.log(path, rr.Image(small).compress(jpeg_quality=85))
+        rec.log(f"{path}/{PINHOLE}", rr.Pinhole(fov_y=np.radians(model.cam_fovy[cam]), aspect_ratio=w / h,
+                                                resolution=[w, h], camera_xyz=rr.ViewCoordinates.RUB,
+                                                image_plane_distance=0.05))
+        rec.log(f"{path}/{PINHOLE}/{IMAGE}", rr.Image(small).compress(jpeg_quality=85))
 
 
 def signal_group(channel: str) -> str:
@@ -182,3 +205,27 @@ def send_signals(rec: rr.RecordingStream, time: np.ndarray, columns: dict[str, n
 def log_text(rec: rr.RecordingStream, entity: str, text: str, t: float) -> None:
     rec.set_time(TIMELINE, duration=t)
     rec.log(entity, rr.TextLog(text, level=rr.TextLogLevel.INFO))
+
+
+def blueprint(entity_paths: Iterable[str]) -> rrb.Blueprint:
+    """The replay layout for a recording with these entities: the cell in 3-D beside one 2-D
+    view per camera (named after it), the signal groups as tabs beside the phase and event log.
+
+    `serpar replay` sends it with the file: the viewer's own heuristics title every camera view
+    ".../pinhole/image" and show only some of the signal groups. The 3-D view leaves the frames
+    out (the frustums stay): rerun 0.41's web viewer drew each one metres wide across the cell
+    instead of on its frustum's image plane."""
+    paths = [p.strip("/") for p in entity_paths]
+    image = re.compile(rf"{ROOT}/cameras/([^/]+)/{PINHOLE}/{IMAGE}")
+    cameras = sorted({m[1] for p in paths if (m := image.fullmatch(p))})
+    frames = [f"/{camera_path(c)}/{PINHOLE}/{IMAGE}" for c in cameras]
+    order = {signal_group(c): k for k, c in reversed(list(enumerate(ch.KNOWN)))}  # the schema's order
+    signals = sorted({p for p in paths if p.startswith("signals/") and p.count("/") == 1},
+                     key=lambda p: (order.get(p, len(order)), p))
+    scene = rrb.Spatial3DView(name=ROOT, origin="/", contents=[f"/{ROOT}/**", *(f"- {f}" for f in frames)],
+                              eye_controls=rrb.EyeControls3D(position=EYE, look_target=LOOK_AT, eye_up=(0, 0, 1)))
+    views = rrb.Grid(*[rrb.Spatial2DView(name=c, origin=f) for c, f in zip(cameras, frames)])
+    plots = rrb.Tabs(*[rrb.TimeSeriesView(name=p.removeprefix("signals/"), origin=p) for p in signals])
+    log = rrb.TextLogView(name="phases and events", origin="/")
+    top = rrb.Horizontal(scene, views) if cameras else scene
+    return rrb.Blueprint(rrb.Vertical(top, rrb.Horizontal(plots, log, column_shares=[3, 1]), row_shares=[3, 2]))
