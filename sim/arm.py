@@ -53,6 +53,11 @@ FINGER_CARRIER_BODY = "finger_carrier"
 GRIP_COMPLIANCE_JOINT = "grip_compliance"
 """Axial spring of the compliant gripper (fingers on the hand, along the approach axis)."""
 PAD_GEOMS: tuple[str, str] = ("pad_left", "pad_right")
+PAD_CONTYPE = 4
+"""contype of the pads (conaffinity 1): they touch default world geoms and the conductors'
+journals and tips from the collision bits, but a conductor's body (contype 2, conaffinity 3,
+:mod:`serpar.sim.collision`) only through the explicit pad pairs the scene adds
+(:func:`serpar.sim.contact.add_pad_pairs`), which carry the pads' own friction damping."""
 FINGER_EQUALITY = "finger_coupling"
 GRIP_ACTUATOR = "grip"
 GRIP_FORCE_MAX = 70.0

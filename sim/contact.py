@@ -7,6 +7,8 @@ from collections.abc import Collection
 import mujoco
 import numpy as np
 
+from serpar.sim.physics import PhysicsConfig
+
 
 class ContactForceProbe:
     """Total contact force that one group of geoms exerts on another, fast enough to read
@@ -83,6 +85,22 @@ def aim_plate_contact(model: mujoco.MjModel, part_body: int) -> slice:
     sensor = model.sensor(PLATE_CONTACT)
     model.sensor_objid[sensor.id] = part_body
     return slice(int(sensor.adr[0]), int(sensor.adr[0]) + 3)
+
+
+def add_pad_pairs(spec: mujoco.MjSpec, pads: Collection[str], part_geom: str, physics: PhysicsConfig) -> None:
+    """Explicit contact pairs between the gripper pads and one part's gripped geom (a
+    conductor's body), so that their friction rows get their own damping
+    (``physics.grip_solreffriction``; MuJoCo sets solreffriction on explicit pairs only). The
+    pads' contype (``serpar.sim.arm.PAD_CONTYPE``) keeps MuJoCo from also making the same
+    contacts from the collision bits. Normal direction, friction and condim are the pad's:
+    what the pad's priority gave these contacts before."""
+    for pad_name in pads:
+        pad = spec.geom(pad_name)
+        mu, spin, roll = pad.friction
+        spec.add_pair(name=f"{pad_name}|{part_geom}", geomname1=pad_name, geomname2=part_geom,
+                      condim=pad.condim, friction=[mu, mu, spin, roll, roll],
+                      solref=list(physics.grip_solref), solimp=list(pad.solimp),
+                      solreffriction=list(physics.grip_solreffriction))
 
 
 def body_geoms(model: mujoco.MjModel, body_id: int) -> set[int]:

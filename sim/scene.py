@@ -20,7 +20,7 @@ from serpar.sim.baseplate import BaseplateConfig, build_baseplate_spec
 from serpar.sim.calibration_board import CheckerboardConfig, add_board
 from serpar.sim.cameras import DEFAULT_PAIRS, SENSOR_PIXELS, StereoPairConfig, add_stereo_pair
 from serpar.sim.conductor import ConductorConfig, build_conductor_spec
-from serpar.sim.contact import add_plate_contact_sensor
+from serpar.sim.contact import add_pad_pairs, add_plate_contact_sensor
 from serpar.sim.physics import PhysicsConfig
 from serpar.sim.plants.arm_changes import ArmPlantChanges, apply_arm_plant
 from serpar.sim.seat_lock import PLATE_BODY
@@ -137,8 +137,6 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
         apply_arm_plant(arm, cfg.arm_plant, cfg.physics.timestep)
     spec.attach(arm, prefix=names.ARM, frame=world.add_frame(pos=[0, 0, 0]))
     for pad in PAD_GEOMS:
-        # Friction is a damper on slip velocity with rate 2/timeconst: a held part slides along the
-        # pads by ~(hand speed)/rate on every move (0.6 mm per 0.2 m move at 0.01 s; README).
         spec.geom(names.ARM + pad).solref = list(cfg.physics.grip_solref)
     if cfg.calibration_board is not None:
         add_board(spec, cfg.calibration_board)
@@ -157,6 +155,9 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
         part = build_conductor_spec(diameters.journals[k], diameters.bodies[k], cfg.conductor, cfg.physics)
         px, py = pockets[k]
         spec.attach(part, prefix=names.conductor(k), frame=world.add_frame(pos=[tx + px, ty + py, top]))
+        # The pads grip a conductor's body through explicit pairs: their friction rows need their
+        # own damping, or a held part drifts in the pads on every move (sim/physics.py).
+        add_pad_pairs(spec, [names.ARM + pad for pad in PAD_GEOMS], f"{names.conductor(k)}body", cfg.physics)
     if cfg.n_conductors:
         add_plate_contact_sensor(spec, names.conductor_body(0), PLATE_BODY)
     for pair in cfg.stereo_pairs:
