@@ -9,12 +9,14 @@ atomically so parallel workers can share it.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
 import os
 import tempfile
 from collections.abc import Callable
+from contextlib import AbstractContextManager
 from pathlib import Path
 
 from serpar.calibration.camera_calibration import DEFAULT_CELL, calibrate
@@ -25,6 +27,20 @@ from serpar.vision.imaging import ImagingConfig
 CAMPAIGN_VERSION = 1
 """Bump when the calibration campaign or solver changes (invalidates every cached file)."""
 PAIRS = ("top", "inspect")
+
+Log = Callable[[str], None]
+Stage = Callable[[str], AbstractContextManager[object]]
+"""Progress of a long step (a calibration): ``with stage(text):`` runs around it; the command
+line shows the elapsed time (serpar.cli.output.stage). Library code prints nothing itself."""
+
+
+def stage_of(text: str, log: Log | None = None, stage: Stage | None = None) -> AbstractContextManager[object]:
+    """The context a long step runs in: `stage`'s, else `log` told that it starts, else none."""
+    if stage is not None:
+        return stage(text)
+    if log is not None:
+        log(text)
+    return contextlib.nullcontext()
 
 
 def cache_dir() -> Path:
@@ -46,8 +62,9 @@ def _write_atomic(path: Path, payload: dict) -> None:
 
 
 def calibrated_pair(name: str, width: int, cfg: SceneConfig = DEFAULT_CELL, seed: int = 0,
-                    log: Callable[[str], None] | None = None) -> StereoPair:
-    """The pair `name` calibrated from rendered board views at `width`, from the cache if there."""
+                    log: Log | None = None, stage: Stage | None = None) -> StereoPair:
+    """The pair `name` calibrated from rendered board views at `width`, from the cache if there;
+    a calibration that runs is announced to `log` or runs inside `stage` (progress)."""
     path = cache_dir() / f"calibration_{name}_{width}_{_key(cfg, name, width, seed)}.json"
     if path.exists():
         try:
@@ -55,9 +72,9 @@ def calibrated_pair(name: str, width: int, cfg: SceneConfig = DEFAULT_CELL, seed
             return StereoPair(CameraModel.from_dict(d["left"]), CameraModel.from_dict(d["right"]))
         except (OSError, ValueError, KeyError):
             pass  # unreadable cache entry: calibrate again and overwrite it
-    if log:
-        log(f"calibrating the {name} stereo pair at {width} px (once per layout; cached in {path.parent})")
-    run = calibrate(name, ImagingConfig(width=width), seed=seed, scene_config=cfg)
+    text = f"calibrating the {name} stereo pair at {width} px (once per layout; cached in {path.parent})"
+    with stage_of(text, log, stage):
+        run = calibrate(name, ImagingConfig(width=width), seed=seed, scene_config=cfg)
     pair = run.calibration.pair
     _write_atomic(path, {"left": pair.left.as_dict(), "right": pair.right.as_dict(),
                          "score": run.score, "views": run.views})
@@ -65,5 +82,5 @@ def calibrated_pair(name: str, width: int, cfg: SceneConfig = DEFAULT_CELL, seed
 
 
 def calibrated_pairs(width: int, cfg: SceneConfig = DEFAULT_CELL, seed: int = 0,
-                     log: Callable[[str], None] | None = None) -> dict[str, StereoPair]:
-    return {name: calibrated_pair(name, width, cfg, seed, log) for name in PAIRS}
+                     log: Log | None = None, stage: Stage | None = None) -> dict[str, StereoPair]:
+    return {name: calibrated_pair(name, width, cfg, seed, log, stage) for name in PAIRS}

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 from serpar.calibration.camera_cache import calibrated_pairs
 from serpar.checks.ablation import ablation_arms, run_ablation, spread_holes
+from serpar.cli import arg_types
 from serpar.cli.cmd_run import check_ray
-from serpar.cli.output import progress, table
+from serpar.cli.output import json_line, progress, stage, table
 from serpar.errors import ConfigError
 from serpar.tasks.episode_config import EpisodeConfig
 from serpar.tasks.platform_model import prepare_models
@@ -22,11 +22,12 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=int, default=1, help="episodes per configuration (default 1)")
     p.add_argument("--holes", type=int, default=6, help="holes per episode, 1..36, spread evenly over the grid (default 6: its diagonal, "
                         "0, 7, 14, 21, 28, 35)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
+    p.add_argument("--seed", type=arg_types.seed, default=0, help="seed of the first episode (default 0)")
     p.add_argument("--workers", type=int, help="parallel local processes (default 2; 1 with --ray)")
     p.add_argument("--ray", metavar="ADDRESS",
                    help="run the episodes on a Ray cluster: local, auto or ray://HOST:PORT (cluster extra)")
-    p.add_argument("--json", action="store_true", help="JSON lines: every hole, then one line per configuration")
+    p.add_argument("--json", action="store_true", help="JSON lines (strict JSON: null, never NaN): every hole, "
+                                                       "then one line per configuration")
     p.set_defaults(func=cmd_ablate)
     return p
 
@@ -43,19 +44,16 @@ def cmd_ablate(args: argparse.Namespace) -> int:
         raise ConfigError(f"--episodes {args.episodes}, --workers {args.workers}: both must be >= 1")
     check_ray(args.ray, args.workers)
     base = EpisodeConfig(seed=args.seed, holes=spread_holes(args.holes))
-    def log(message: str) -> None:
-        print(message, file=sys.stderr)
-
-    calibrated_pairs(base.camera_width, log=log)
+    calibrated_pairs(base.camera_width, stage=stage)
     arms = ablation_arms(base)
-    prepare_models([cfg for arm in arms for cfg in episode_configs(arm.config, args.episodes)], log)
+    prepare_models([cfg for arm in arms for cfg in episode_configs(arm.config, args.episodes)], stage=stage)
     bar = progress(len(arms) * args.episodes * args.holes, "holes", enabled=sys.stderr.isatty())
 
     def on_hole(r: dict) -> None:
         bar.update(1)
         bar.set_postfix_str(f"{r.get('config')}: hole {r['hole']} {r['outcome']}")
         if args.json:
-            print(json.dumps(r, default=float), flush=True)
+            print(json_line(r), flush=True)
 
     remote = args.workers > 1 or args.ray is not None  # holes arrive per finished episode
 
@@ -70,7 +68,7 @@ def cmd_ablate(args: argparse.Namespace) -> int:
     bar.close()
     if args.json:
         for res in results:
-            print(json.dumps(res.as_dict(), default=float))
+            print(json_line(res.as_dict()))
     else:
         rows = []
         for res in results:

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from serpar.checks.blind_bench import KINDS, RMS_TARGET, blind_bench, summarise
+from serpar.cli import arg_types
 from serpar.cli.output import print_json, progress, table
 from serpar.twins.registry import DOMAINS
 
@@ -14,7 +15,7 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("blind-bench", help="random concealed effect per trial, diagnosed "
                                            "without the answer, scored")
     p.add_argument("--trials", type=int, default=12, help="number of trials (default 12)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=arg_types.seed, default=0, help="random seed (default 0)")
     p.add_argument("--domain", action="append",
                    help="restrict to a domain (repeatable): arm_static, arm_dynamics, stewart, "
                         "stewart_motion")

@@ -19,7 +19,9 @@ from serpar.calibration.stewart_campaign import MocapNoise
 from serpar.calibration.stewart_params import save_stewart_parameters
 from serpar.calibration.stewart_solvers import SwarmConfig
 from serpar.calibration.stewart_stereo import StereoConfig
+from serpar.cli import arg_types
 from serpar.cli.cmd_calibrate_arm import register_arm
+from serpar.cli.out_paths import add_force, out_file, out_folder
 from serpar.cli.output import print_json, progress, table
 from serpar.errors import ConfigError
 
@@ -47,9 +49,12 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                                     "measured and reported) or kinematic (exact kinematics + mocap)")
     s.add_argument("--camera-width", type=int, default=2048, help="stereo readout width: 2048 (default), 1024, 512")
     s.add_argument("--verify", type=int, default=30, help="random verification poses (default 30)")
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--out", help="write the parameters identified by the best solver (a stewart_calibration file)")
-    s.add_argument("--plot", metavar="DIR", help="write per-pose error plots before/after (like Figs. 8-9)")
+    s.add_argument("--seed", type=arg_types.seed, default=0)
+    s.add_argument("--out", help="write the parameters identified by the best solver (a stewart_calibration "
+                                 "file; an existing one is refused unless --force)")
+    s.add_argument("--plot", metavar="DIR", help="write per-pose error plots before/after (like Figs. 8-9; a "
+                                                 "folder that holds files is refused unless --force)")
+    add_force(s)
     s.add_argument("--json", action="store_true", help="print JSON")
     s.set_defaults(func=cmd_calibrate_stewart)
     return p
@@ -117,6 +122,10 @@ def measurement_dict(report) -> dict:
 
 def cmd_calibrate_stewart(args: argparse.Namespace) -> int:
     cfg = config_from(args)
+    if args.out:  # before the campaign
+        out_file(args.out, "--out", args.force)
+    if args.plot:
+        out_folder(args.plot, "--plot", args.force)
     bar = progress(2 + 2 * len(cfg.solvers), "campaign stages", enabled=sys.stderr.isatty())
 
     def stage(text: str) -> None:

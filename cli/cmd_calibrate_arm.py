@@ -20,6 +20,7 @@ from serpar.calibration.arm_campaign import (
 from serpar.calibration.panda_data import load_panda_folder
 from serpar.calibration.poe_calibration import GAUGE
 from serpar.calibration.robot_campaign import noise_bound_rms, robot_calibration
+from serpar.cli import arg_types
 from serpar.cli.output import print_json, progress, table
 from serpar.cli.robot_option import add_robot_option
 from serpar.errors import ConfigError
@@ -54,7 +55,7 @@ def register_arm(calibrate_sub: argparse._SubParsersAction) -> argparse.Argument
                    help="a panda_1-layout folder (<placement>/hole_0.csv, hole_1.csv; two "
                         "placements or more, other files are skipped with a note): train on "
                         "the other placements, test on one, each in turn")
-    p.add_argument("--seed", type=int, default=3,
+    p.add_argument("--seed", type=arg_types.seed, default=3,
                    help="hidden errors, poses and tracker noise of the simulated arm (default 3)")
     add_robot_option(p)
     p.add_argument("--json", action="store_true", help="print JSON")

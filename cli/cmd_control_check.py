@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from serpar.checks.control_check import PAPER, STAGES, run_control_check
+from serpar.cli import arg_types
 from serpar.cli.output import print_json, progress, table
 from serpar.errors import UnknownNameError
 
@@ -17,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                              "paper's (exit 1 if a bound fails)")
     p.add_argument("--no-noise", action="store_true",
                    help="ideal sensors (default: torque noise, bias drift, encoder quantisation)")
-    p.add_argument("--seed", type=int, default=0, help="sensor noise seed (default 0)")
+    p.add_argument("--seed", type=arg_types.seed, default=0, help="sensor noise seed (default 0)")
     p.add_argument("--stage", action="append", help=f"run only this stage (repeatable): {STAGE_HELP}")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_control_check)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from serpar.cli import arg_types
+from serpar.cli.out_paths import add_force, out_files
 from serpar.cli.output import print_json, progress, table
 from serpar.cli.robot_option import add_robot_option
 from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis, load_notes
@@ -27,14 +29,15 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--report", metavar="OUT.html",
                    help="write an HTML report (plots embedded) and OUT.model.json beside it "
                         "(Stewart geometry or encoder offsets: also OUT.stewart_params.json, "
-                        "for serpar run's stewart_calibration)")
+                        "for serpar run's stewart_calibration); existing files are refused unless --force")
+    add_force(p)
     p.add_argument("--model", metavar="M.model.json|CELL.yaml",
                    help="diagnose against a previous diagnosis's model file, or against the "
                         "cell an episode config (serpar run --config YAML) builds: its arm "
                         "friction and plant model; their effects are fixed in the nominal "
                         "prediction (default: the nominal arm); the written model is M's "
                         "updated by what this recording shows")
-    p.add_argument("--seed", type=int, default=0, help="seed of the train/held-out split "
+    p.add_argument("--seed", type=arg_types.seed, default=0, help="seed of the train/held-out split "
                                                        "where the recording does not fix it")
     add_robot_option(p)
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -81,6 +84,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     import sys
 
 
+    if args.report:  # before any work: the report, its model file and a Stewart parameter file
+        report = Path(args.report)
+        out_files([report, *(report.with_name(report.stem + s) for s in (".model.json", ".stewart_params.json"))],
+                  "--report", args.force)
     robot = load_robot(getattr(args, "robot", None))
     rec = load_for_diagnosis(args.recording, robot)
     family = family_from_recording(rec, robot)

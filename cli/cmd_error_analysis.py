@@ -8,6 +8,8 @@ from pathlib import Path
 
 from serpar.checks import tool_changer_robot as s1
 from serpar.checks.error_analysis import CHUNK, ErrorAnalysisConfig, run_error_analysis
+from serpar.cli import arg_types
+from serpar.cli.out_paths import add_force, out_folder
 from serpar.cli.output import print_json, progress, table
 from serpar.errors import ConfigError
 
@@ -40,23 +42,24 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--sigmas", choices=SIGMA_CHOICES, default=None,
                    help="transmission-error sigmas: table2 (per link/joint, seed001 default) or "
                         "table1 (per error type; the only choice for panda)")
-    p.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    p.add_argument("--seed", type=arg_types.seed, default=1, help="random seed (default 1)")
     p.add_argument("--plot", metavar="DIR",
                    help="write error_transmission.png, error_clearance.png (Fig. 6 layout) "
-                        "and sensitivity.png into DIR")
+                        "and sensitivity.png into DIR (a folder that holds files is refused "
+                        "unless --force)")
     p.add_argument("--json", action="store_true", help="print JSON")
+    add_force(p)
     p.set_defaults(func=cmd_error_analysis)
     return p
 
 
-def _plot_dir(arg: str | None) -> Path | None:
+def _plot_dir(arg: str | None, force: bool) -> Path | None:
     if arg is None:
         return None
     out = Path(arg)
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--plot {arg!r}: exists and is not a folder")
     if not out.parent.is_dir():
         raise ConfigError(f"--plot {arg!r}: folder {str(out.parent)!r} does not exist")
+    out_folder(out, "--plot", force)  # not a file, writable; one that holds files needs --force
     out.mkdir(exist_ok=True)
     return out
 
@@ -134,7 +137,7 @@ def _write_plots(result, out: Path) -> list[str]:
 def cmd_error_analysis(args: argparse.Namespace) -> int:
     config = ErrorAnalysisConfig(robot=args.robot, sigmas=args.sigmas, samples=args.samples,
                                  seed=args.seed)  # validates: bad input fails fast
-    out = _plot_dir(args.plot)
+    out = _plot_dir(args.plot, args.force)
     show = sys.stderr.isatty() and args.samples > CHUNK
     with progress(2 * args.samples, "error-analysis", enabled=show) as bar:
         result = run_error_analysis(config, progress=bar.update)

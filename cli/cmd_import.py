@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from serpar.calibration.arm_static_data import static_data
+from serpar.cli.out_paths import add_force, out_folder
 from serpar.cli.output import print_json
 from serpar.sim.importers.assemble import ImportOptions, parse_map, to_recording
 from serpar.sim.importers.files import FORMATS, file_format, read_files
@@ -44,7 +45,9 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                    "for measurements: sigma_m=15e-6")
     p.add_argument("--model", help="JSON merged into meta.model (e.g. the measurements' "
                                    "tool_offset_m, distances)")
-    p.add_argument("--out", required=True, help="output recording folder")
+    p.add_argument("--out", required=True, help="output recording folder (an existing one is refused "
+                                                "unless --force, which replaces its recording files)")
+    add_force(p)
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_import)
     return p
@@ -62,6 +65,7 @@ def _sigma(text: str | None) -> dict[str, float]:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
+    folder = out_folder(args.out, "--out", args.force)  # before any file is read
     sigma = _sigma(args.sigma)
     try:
         extra = json.loads(args.model) if args.model else {}
@@ -79,7 +83,8 @@ def cmd_import(args: argparse.Namespace) -> int:
     rec, report = to_recording(raw, mapping, options, sigma, extra)
     if args.table == "measurements":
         static_data(rec)  # validate now, one line, rather than at diagnosis time
-    out = write_recording(args.out, rec)
+    folder.clear()
+    out = write_recording(folder.path, rec)
     if args.json:
         print_json({"out": str(out), "channels": list(rec.meta.channels),
                     "sample_rate_hz": rec.meta.sample_rate_hz, **report.as_dict()})

@@ -4,12 +4,13 @@ effect; the truth goes to ``answer.json`` beside it, never into the recording.""
 from __future__ import annotations
 
 import argparse
-import json
-from pathlib import Path
 
+from serpar.cli import arg_types
+from serpar.cli.out_paths import RECORDING_FILES, add_force, out_folder
 from serpar.cli.output import print_json
 from serpar.errors import ConfigError
 from serpar.sim.recording import write_recording
+from serpar.sim.strict_json import dumps
 from serpar.twins.registry import effects, make_twin
 
 
@@ -27,8 +28,10 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--sigma-error", type=float, default=1.0,
                    help="the recording states its noise sigma this many times too small "
                         "(default 1: stated correctly)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--out", required=False, help="output folder (recording + answer.json)")
+    p.add_argument("--seed", type=arg_types.seed, default=0, help="random seed (default 0)")
+    p.add_argument("--out", required=False, help="output folder (recording + answer.json; an existing one "
+                                                 "is refused unless --force)")
+    add_force(p)
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_twin)
     return p
@@ -42,10 +45,12 @@ def cmd_twin(args: argparse.Namespace) -> int:
     if not args.out:
         raise ConfigError("--out DIR is required (the recording goes there, the truth to "
                           "DIR/answer.json)")
+    folder = out_folder(args.out, "--out", args.force, RECORDING_FILES + ("answer.json",))
     effect = None if args.effect == "none" else args.effect
     rec, answer = make_twin(effect, args.magnitude, args.seed, args.domain, args.sigma_error)
-    out = write_recording(Path(args.out), rec)
-    (out / "answer.json").write_text(json.dumps(answer, indent=2, default=float))
+    folder.clear()
+    out = write_recording(folder.path, rec)
+    (out / "answer.json").write_text(dumps(answer, indent=2))
     if args.json:
         print_json({"out": str(out), "answer_file": str(out / "answer.json"),
                     "effect": answer.get("effect"), "domain": answer.get("domain")})

@@ -7,6 +7,8 @@ import sys
 from pathlib import Path
 
 from serpar.checks.vision_check import VisionCheckConfig, run_vision_check, total_ticks
+from serpar.cli import arg_types
+from serpar.cli.out_paths import add_force, out_folder
 from serpar.cli.output import print_json, progress, table
 
 TARGETS = {"hole_p95_mm": 0.05, "offset_mm": 0.02, "tilt_deg": 0.1, "occupancy": 1.0}
@@ -21,10 +23,12 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--poses", type=int, default=10, help="random platform poses for steps 1-2 (default 10)")
     p.add_argument("--occupied", type=int, default=6, help="conductors seated in holes per scene (default 6)")
     p.add_argument("--trials", type=int, default=10, help="in-hand inspections for step 4 (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="scene, pose and noise seed (default 0)")
+    p.add_argument("--seed", type=arg_types.seed, default=0, help="scene, pose and noise seed (default 0)")
     p.add_argument("--no-noise", action="store_true", help="clean renders (default: sensor noise and "
                                                            "lighting variation)")
-    p.add_argument("--overlay", metavar="DIR", help="write detection overlays (PNG) for every step here")
+    p.add_argument("--overlay", metavar="DIR", help="write detection overlays (PNG) for every step here (a "
+                                                    "folder that holds files is refused unless --force)")
+    add_force(p)
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_vision_check)
     return p
@@ -84,6 +88,8 @@ def _print_width(width: str, r: dict) -> None:
 
 
 def cmd_vision_check(args: argparse.Namespace) -> int:
+    if args.overlay:  # before any rendering
+        out_folder(args.overlay, "--overlay", args.force)
     cfg = VisionCheckConfig(widths=tuple(args.width) if args.width else (2048, 1024), platform_poses=args.poses,
                             occupied=args.occupied, inhand_trials=args.trials, seed=args.seed,
                             noise=not args.no_noise, overlay_dir=Path(args.overlay) if args.overlay else None)

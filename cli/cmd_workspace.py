@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from serpar.checks.workspace import (
     CHUNK,
@@ -14,6 +13,8 @@ from serpar.checks.workspace import (
     workspace_monte_carlo,
 )
 from serpar.checks.workspace_plot import plot_workspace
+from serpar.cli import arg_types
+from serpar.cli.out_paths import add_force, out_file
 from serpar.cli.output import print_json, progress, table
 from serpar.errors import ConfigError
 from serpar.sim.stewart import stewart_geometry
@@ -27,11 +28,13 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                          "of 200 000 valid poses")
     p.add_argument("--samples", type=int, default=200_000,
                    help="number of uniform samples in the seed's box (default 200000)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=arg_types.seed, default=0, help="random seed (default 0)")
     p.add_argument("--hinge-definition", choices=HINGE_CHOICES, default="deflection",
                    help="hinge angle: deflection from the home leg direction (default), "
                         "cardan (per-axis, = the MuJoCo stops) or normal (from the plate normal)")
-    p.add_argument("--plot", help="write the point cloud (Fig. 6 layout) to this .png")
+    p.add_argument("--plot", help="write the point cloud (Fig. 6 layout) to this .png (an existing file is "
+                                  "refused unless --force)")
+    add_force(p)
     p.add_argument("--l-min-scan", action="store_true",
                    help="also report the l_min (and stroke) the seed's 68.3 %% would need")
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -43,11 +46,7 @@ def _check(args: argparse.Namespace) -> None:
     if args.samples <= 0:
         raise ConfigError(f"--samples {args.samples}: must be a positive integer")
     if args.plot is not None:
-        out = Path(args.plot)
-        if out.suffix.lower() != ".png":
-            raise ConfigError(f"--plot {args.plot!r}: the path must end in .png")
-        if not out.parent.is_dir():
-            raise ConfigError(f"--plot {args.plot!r}: folder {str(out.parent)!r} does not exist")
+        out_file(args.plot, "--plot", args.force, suffix=".png", parents=False)
 
 
 def cmd_workspace(args: argparse.Namespace) -> int:

@@ -8,6 +8,7 @@ import sys
 from collections.abc import Sequence
 
 from serpar.cli import (
+    arg_types,
     cmd_ablate,
     cmd_bench,
     cmd_blind_bench,
@@ -22,6 +23,7 @@ from serpar.cli import (
     cmd_vision_check,
     cmd_workspace,
 )
+from serpar.cli.out_paths import add_force, out_file
 from serpar.cli.output import fail, print_json, progress, table
 from serpar.errors import SerparError
 from serpar.sim.config_io import load_yaml_config
@@ -39,6 +41,26 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # type: ignore[override]
         sys.stderr.write(f"{self.prog}: error: {message}\n")
         raise SystemExit(2)
+
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        """As argparse's, but an unknown flag is named with the valid flags of its command."""
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            command = self._command_parser(parsed)
+            flags = sorted({o for a in command._actions for o in a.option_strings if o.startswith("--")})
+            self.error(f"unrecognized argument(s) {' '.join(extras)}"
+                       + (f" for {command.prog}; valid flags: {', '.join(flags)}" if flags else ""))
+        return parsed
+
+    def _command_parser(self, parsed: argparse.Namespace) -> argparse.ArgumentParser:
+        """The innermost (sub)command parser the arguments chose (serpar calibrate arm: its own)."""
+        parser: argparse.ArgumentParser = self
+        while True:
+            sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+            name = getattr(parsed, sub.dest, None) if sub is not None else None
+            if sub is None or name not in sub.choices:
+                return parser
+            parser = sub.choices[name]
 
 
 def _scene_config(args: argparse.Namespace):
@@ -81,6 +103,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
+    out_file(args.out, "--out", args.force, suffix=".png")  # before any rendering
     scene = build_scene(_scene_config(args))
     apply_state(scene, args.state)
     renderer = CameraRenderer(scene.model)
@@ -125,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
                                 metavar="{info,render,validate,control-check,workspace,vision-check,bench,run,ablate,replay,calibrate,error-analysis,diagnose,twin,blind-bench,import}")
 
     def scene_args(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--seed", type=int, help="seed of the tolerance draws (integer; default 0)")
+        p.add_argument("--seed", type=arg_types.seed, help="seed of the tolerance draws (integer; default 0)")
         p.add_argument("--config", help="scene config YAML (keys of serpar.sim.scene.SceneConfig)")
 
     p = sub.add_parser("info", help="bodies, DoF, actuators, sensors, cameras, drawn diameters")
@@ -138,7 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
     scene_args(p)
     p.add_argument("--camera", required=True,
                    help="overview, top_left, top_right, inspect_left or inspect_right")
-    p.add_argument("--out", required=True, help="output .png path")
+    p.add_argument("--out", required=True, help="output .png path (an existing file is refused unless --force)")
+    add_force(p)
     p.add_argument("--width", type=int, help="image width (stereo cameras: 4:3 with height)")
     p.add_argument("--height", type=int, help="image height")
     p.add_argument("--state", default="home",

@@ -1,16 +1,26 @@
-"""Terminal output helpers: aligned tables, JSON, one-line errors, progress bars."""
+"""Terminal output helpers: aligned tables, strict JSON, one-line errors, progress bars and
+stage lines."""
 
 from __future__ import annotations
 
-import json
+import contextlib
 import sys
-from collections.abc import Iterable, Sequence
+import threading
+import time
+from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
+
+from serpar.sim.strict_json import dumps
 
 
 def print_json(obj: Any) -> None:
-    json.dump(obj, sys.stdout, indent=2, default=float)
-    sys.stdout.write("\n")
+    """Indented strict JSON on stdout (NaN and infinities as null)."""
+    sys.stdout.write(dumps(obj, indent=2) + "\n")
+
+
+def json_line(obj: Any) -> str:
+    """One strict JSON line (NaN and infinities as null): what the JSON-lines outputs print."""
+    return dumps(obj)
 
 
 def table(headers: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
@@ -33,3 +43,35 @@ def progress(total: int, desc: str, enabled: bool = True):
     from tqdm import tqdm
 
     return tqdm(total=total, desc=desc, file=sys.stderr, disable=not enabled, leave=False)
+
+
+@contextlib.contextmanager
+def stage(text: str) -> Iterator[None]:
+    """Progress of one long step without counts (a calibration) on stderr: a line when it
+    starts and one with its elapsed time when it ends (naming the step when stderr is not a
+    terminal; on a terminal the second line ticks every second meanwhile). The library takes
+    this as its ``stage`` callback."""
+    err, t0 = sys.stderr, time.perf_counter()
+    tty, ended = err.isatty(), "stopped after"
+    err.write(f"{text} ...\n")
+    err.flush()
+    stop = threading.Event()
+
+    def tick() -> None:
+        while not stop.wait(1.0):
+            err.write(f"\r  {time.perf_counter() - t0:.0f} s")
+            err.flush()
+
+    ticker = threading.Thread(target=tick, daemon=True)
+    if tty:
+        ticker.start()
+    try:
+        yield
+        ended = "done in"
+    finally:
+        stop.set()
+        if tty:
+            ticker.join()
+        what = "\r " if tty else text.split(" (")[0] + ":"  # a log line names its step
+        err.write(f"{what} {ended} {time.perf_counter() - t0:.1f} s\n")
+        err.flush()

@@ -8,7 +8,6 @@ from __future__ import annotations
 import base64
 import html
 import io
-import json
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +15,7 @@ import numpy as np
 from serpar.diagnosis.family import LocateRow, export_model_files
 from serpar.diagnosis.report_units import section as units_section
 from serpar.diagnosis.result import Diagnosis
+from serpar.sim.strict_json import dumps
 
 
 def _png(fig) -> str:  # type: ignore[no-untyped-def]
@@ -88,7 +88,7 @@ def write_report(diag: Diagnosis, path: str | Path, source: str, family: object 
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     model_path = out.with_name(out.stem + ".model.json")
-    model_path.write_text(json.dumps({"source": source, **diag.model}, indent=2))
+    model_path.write_text(dumps({"source": source, **diag.model}, indent=2))
     exported = export_model_files(family, diag.model, out.with_name(out.stem))
     where = _table(["channel", "split by", "label", "n", "RMS/sigma", "p (chi-square)", "flag"],
                    [[r.channel, r.group, r.label, r.n, f"{r.rms_whitened:.3g}",

@@ -20,6 +20,7 @@ import pyarrow.parquet as pq
 
 from serpar.errors import SerparError
 from serpar.sim.channels import KNOWN_HELP, PHASE, TIME, is_channel, plausible_max
+from serpar.sim.strict_json import dumps
 
 SCHEMA_VERSION = 1
 SOURCES = ("sim", "real")
@@ -88,9 +89,10 @@ class RecordingMeta:
             phases = tuple(PhaseSegment(str(p["name"]), _number(p["start"], "phase start"),
                                         _number(p["end"], "phase end")) for p in d.get("phases", []))
             sigma = {str(k): _number(v, f"noise_sigma[{k}]") for k, v in dict(d.get("noise_sigma", {})).items()}
-            bad = [k for k, v in sigma.items() if not v > 0]
+            bad = [k for k, v in sigma.items() if v < 0]
             if bad:
-                raise RecordingError(f"meta.json: noise_sigma of {', '.join(bad)} must be > 0")
+                raise RecordingError(f"meta.json: noise_sigma of {', '.join(bad)} must be >= 0 "
+                                     "(0: an ideal sensor)")
             return cls(source=d["source"], sample_rate_hz=_number(d["sample_rate_hz"], "sample_rate_hz"),
                        channels=tuple(channels), noise_sigma=sigma,
                        phases=phases, model=dict(d.get("model", {})),
@@ -150,7 +152,7 @@ def write_recording(folder: str | Path, recording: Recording, fmt: str = "parque
     _check_signals(recording.meta, recording.signals)
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "meta.json").write_text(json.dumps(recording.meta.as_json(), indent=2))
+    (out / "meta.json").write_text(dumps(recording.meta.as_json(), indent=2))
     tables = {"signals": recording.signals, "measurements": recording.measurements}
     for name, table in tables.items():
         if table is None:

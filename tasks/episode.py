@@ -4,7 +4,9 @@
 carry, 4 in-hand inspection (inspect cameras), 5 the Stewart platform brings the hole under
 the held journal (or, serial robot alone, the arm goes to the hole), 6 compliant insertion.
 Each hole ends as an :class:`HoleRecord` with one outcome; a simulation that breaks down ends
-its hole as a failure with the reason, and the episode goes on from the state before it.
+its hole as a failure with the reason, and the episode goes on from the state before it. An
+interrupt (Ctrl-C, or SIGTERM where the caller turns it into KeyboardInterrupt("SIGTERM")) ends
+the episode with :class:`EpisodeInterrupted`: what finished, and where it stopped.
 """
 
 from __future__ import annotations
@@ -65,13 +67,33 @@ class HoleRecord:
 class EpisodeSummary:
     seed: int
     holes: int
+    """Holes finished (all the config's when complete)."""
     successes: int
     counts: dict[str, int]
     sim_time_s: float
     wall_s: float
+    complete: bool = True
+    """False: the episode was interrupted before its last hole ended."""
 
     def as_dict(self) -> dict[str, object]:
         return {"kind": "episode", **dataclasses.asdict(self)}
+
+
+def signal_name(exc: BaseException) -> str:
+    """Which signal a KeyboardInterrupt stands for: its first argument when that names one
+    (the command line raises KeyboardInterrupt("SIGTERM") on SIGTERM), else SIGINT."""
+    name = exc.args[0] if exc.args else None
+    return name if isinstance(name, str) and name.startswith("SIG") else "SIGINT"
+
+
+class EpisodeInterrupted(KeyboardInterrupt):
+    """An episode stopped by an interrupt: `where` ({signal, episode, cycle, hole, phase}: the
+    cycle under way (or, between cycles, the next one, phase "between cycles"), its hole if
+    chosen yet, the cell's phase) and `summary` of the holes that finished (complete=False)."""
+
+    def __init__(self, where: dict[str, object], summary: EpisodeSummary) -> None:
+        super().__init__(where["signal"])
+        self.where, self.summary = where, summary
 
 
 def build_runtime(cfg: EpisodeConfig) -> tuple[CellRuntime, PlateCommander]:
@@ -93,6 +115,7 @@ class _Snapshot:
         mujoco.mj_getState(m, d, self.state, self.spec)
         self.time, self.commanded = rt.time, plate.commanded.copy()
         self.gripper = (rt.gripper.width_target, rt.gripper.squeeze)
+        self.load = (rt.load_mass, rt.load_com.copy())
 
     def restore(self, rt: CellRuntime, plate: PlateCommander) -> None:
         m, d = rt.scene.model, rt.scene.data
@@ -105,6 +128,7 @@ class _Snapshot:
         plate.reset_to(self.commanded)
         rt.arm.hold_joints(d.qpos[rt.scene.arm_qpos_adr].copy())
         rt.gripper.width_target, rt.gripper.squeeze = self.gripper
+        rt.set_load(*self.load)
 
 
 def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
@@ -132,10 +156,12 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
     cycle = HoleCycle(rt, plate, camera, pairs, cfg, law)
     counts = {o.value: 0 for o in Outcome}
     n = cfg.holes if isinstance(cfg.holes, int) else len(cfg.holes)
+    done, current = 0, None  # holes finished; the cycle under way
     try:
         rt.run(SETTLE_S)
         cycle.register_platform()
         for k in range(n):
+            current = k
             wanted = None if isinstance(cfg.holes, int) else cfg.holes[k]
             snap, t0, w0 = _Snapshot(rt, plate), rt.time, time.perf_counter()
             broken = False
@@ -157,8 +183,27 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
             if broken:
                 snap.restore(rt, plate)
             counts[record.outcome] += 1
+            done, current = done + 1, None
+            if recorder is not None:
+                recorder.hole_done(record.as_dict())
             if on_record:
                 on_record(record)
+        if recorder is not None:
+            recorder.complete = True
+    except KeyboardInterrupt as exc:
+        between = current is None and 0 < done < n  # a cycle ended, the next one not begun
+        where = {"signal": signal_name(exc), "episode": cfg.seed, "cycle": done if between else current,
+                 "hole": None if current is None else cycle.hole,
+                 "phase": "between cycles" if between else rt.phase}
+        if recorder is not None:
+            recorder.ended = {"interrupted": where}
+        partial = EpisodeSummary(cfg.seed, done, counts["success"], counts, rt.time,
+                                 time.perf_counter() - t_wall, complete=False)
+        raise EpisodeInterrupted(where, partial) from None
+    except BaseException as exc:
+        if recorder is not None:
+            recorder.ended = {"error": f"{type(exc).__name__}: {exc}"}
+        raise
     finally:
         for hook in rebind:
             rt.scene.on_recompile.remove(hook)

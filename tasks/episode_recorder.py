@@ -7,12 +7,18 @@ controller's input), the torque and wrench estimate it computed from them, and t
 state at t_k (legs, platform, gripper, contact), kept from the previous call. After a state
 restore (a broken cycle) the cell's clock jumps back; the recording's ``time`` goes on
 (``x_sim_time`` is the cell's clock) and the period with the stale plant sample is skipped.
+
+meta.json is there from the start and rewritten (atomically) after each hole: ``complete``
+(false until the episode has ended normally), ``holes`` (each finished hole's outcome), and
+for an episode that did not complete, ``ended`` (where it was interrupted, or its error).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import os
+import shutil
 from pathlib import Path
 
 import mujoco
@@ -31,13 +37,19 @@ from serpar.sim.recording import (
 from serpar.sim.scene import Scene
 from serpar.sim.seat_lock import PLATE_BODY
 from serpar.tasks import rerun_scene
+from serpar.sim.strict_json import dumps
 
 POSE_HZ = 50.0
 """Body poses for the rerun file (the signals are at the control rate)."""
 RRD_NAME = "episode.rrd"
+META_NAME = "meta.json"
+SIGNALS_NAME = "signals.parquet"
+WRITING = ".writing"
+"""Sub-folder the tables are written into before they are moved in place."""
 
 
-ARM = (ch.TIME, *ch.Q, *ch.DQ, *ch.TAU_J, *ch.TAU_J_D, *ch.F_EXT, *ch.TCP_POSITION, *ch.TCP_QUAT)
+ARM = (ch.TIME, *ch.Q, *ch.DQ, *ch.TAU_J, *ch.TAU_J_D, *ch.F_EXT, ch.M_LOAD, *ch.F_X_CLOAD,
+       *ch.TCP_POSITION, *ch.TCP_QUAT)
 PLANT = (*ch.LEG_CMD, *ch.LEG, *ch.PLATFORM_POSITION, *ch.PLATFORM_QUAT, ch.GRIPPER_WIDTH,
          *ch.CONTACT_FORCE)
 SIM_TIME = ch.USER_PREFIX + "sim_time"
@@ -52,9 +64,13 @@ def _span(first: str, last: str) -> slice:
 Q, DQ, TJ, TJD = (_span(c[0], c[-1]) for c in (ch.Q, ch.DQ, ch.TAU_J, ch.TAU_J_D))
 F, EE_P, EE_Q = (_span(c[0], c[-1]) for c in (ch.F_EXT, ch.TCP_POSITION, ch.TCP_QUAT))
 PL = _span(PLANT[0], PLANT[-1])
+LOAD_MASS, LOAD_COM = _I[ch.M_LOAD], _span(ch.F_X_CLOAD[0], ch.F_X_CLOAD[-1])
 NOTES = {
     "time": "start of each 1 ms control period; continues across state restores (x_sim_time is the cell's clock)",
-    "q, dq, tau_J": "the arm's sensor model (20-bit encoders, velocity and joint torque noise, torque bias drift)",
+    "q, dq, tau_J": "the arm's sensor model (20-bit encoders, velocity and joint torque noise, torque bias "
+                    "drift); q, dq at the period's start, tau_J the mean over the period that ended there",
+    "m_load, F_x_Cload": "the load the task declared when it grasped a part (libfranka setLoad: nominal "
+                         "mass, CoM in the flange frame), 0 with an empty hand",
     "tau_J_d": "joint torques commanded from that sample (saturated), applied over the period",
     "O_F_ext_hat_K": "the controller's external wrench estimate at the TCP, arm base frame (zeroed by each tare)",
     "O_T_EE": "TCP pose from the nominal arm model at the measured joints, arm base frame",
@@ -83,6 +99,13 @@ class EpisodeRecorder:
 
         self.rt, self.folder, self.model = rt, Path(folder), model
         self.folder.mkdir(parents=True, exist_ok=True)
+        for stale in (META_NAME, SIGNALS_NAME, RRD_NAME):  # a previous recording's (--force)
+            (self.folder / stale).unlink(missing_ok=True)
+        self.complete = False
+        """Set once the episode has ended normally; meta.json says so when written."""
+        self.ended: dict[str, object] | None = None
+        """Why an incomplete episode ended: {"interrupted": {...}} or {"error": "..."}."""
+        self._holes: list[dict[str, object]] = []
         m, d = rt.scene.model, rt.scene.data
         self._dt = rt.dt
         self._signals = SignalRecorder(CHANNELS, capacity=1 << 16)
@@ -106,6 +129,7 @@ class EpisodeRecorder:
         self._poses = rerun_scene.PoseTrack(self._rec, m, d)
         self._sample_plant()
         self._poses.sample(d, rt.time)
+        self._write_meta(self.meta())
 
     def rebind(self, scene: Scene) -> None:
         """After the scene was recompiled (a seated part moved into the plate)."""
@@ -124,6 +148,7 @@ class EpisodeRecorder:
         t = t_meas + self._offset
         row[0] = t
         row[Q], row[DQ], row[TJ], row[TJD], row[F] = meas.q, meas.dq, meas.tau_J, arm.tau, arm.wrench
+        row[LOAD_MASS], row[LOAD_COM] = rt.load_mass, rt.load_com
         nominal = arm.nominal
         site = nominal.index.tcp_site
         row[EE_P] = nominal.data.site_xpos[site]
@@ -164,28 +189,54 @@ class EpisodeRecorder:
         """An annotation in the rerun file (e.g. how a hole ended)."""
         self._rr.log_text(self._rec, "events", text, self.rt.time + self._offset)
 
-    def recording(self) -> Recording:
-        """What has been recorded so far, in the schema (DESIGN.md §4)."""
+    def hole_done(self, outcome: dict[str, object]) -> None:
+        """A hole's outcome (its record, wall time left out so the file is reproducible) into
+        meta.json now: what finished survives an interrupted or crashed run."""
+        self._holes.append({k: v for k, v in outcome.items() if k not in ("kind", "wall_s")})
+        self._write_meta(self.meta())
+
+    def _write_meta(self, meta: RecordingMeta) -> None:
+        status: dict[str, object] = {"complete": self.complete, "holes": self._holes}
+        if not self.complete and self.ended is not None:
+            status["ended"] = self.ended
+        path = self.folder / META_NAME
+        partial = path.with_name(f".{META_NAME}.{os.getpid()}.partial")
+        partial.write_text(dumps({**meta.as_json(), **status}, indent=2))
+        os.replace(partial, path)  # a reader sees the old file or the new one, never half
+
+    def meta(self) -> RecordingMeta:
+        """meta.json of what has been recorded so far."""
         sensors = self.rt.arm.config.sensors
         step = 2 * np.pi / sensors.encoder_counts_per_rev if sensors.encoder_counts_per_rev else 0.0
         sigma = {**{c: step / np.sqrt(12) for c in ch.Q},  # uniform quantisation error
                  **{c: sensors.velocity_noise_std for c in ch.DQ},
                  **{c: sensors.torque_noise_std for c in ch.TAU_J}}
-        model = json.loads(json.dumps({**self.model, "arm_sensors": dataclasses.asdict(sensors),
-                                       "stewart_l_min": self._l_min, "channel_notes": NOTES}, default=str))
+        model = json.loads(dumps({**self.model, "arm_sensors": dataclasses.asdict(sensors),  # strict: NaN -> null
+                                  "stewart_l_min": self._l_min, "channel_notes": NOTES}))
         time = self._signals.column(ch.TIME)  # a phase ends at its last row
         ends = [*time[np.searchsorted(time, self._phase_starts[1:]) - 1], self._last]
         phases = tuple(PhaseSegment(n, s, float(e)) for n, s, e in zip(self._phase_names, self._phase_starts, ends))
-        meta = RecordingMeta(source="sim", sample_rate_hz=1.0 / self._dt, channels=CHANNELS, noise_sigma=sigma,
+        return RecordingMeta(source="sim", sample_rate_hz=1.0 / self._dt, channels=CHANNELS, noise_sigma=sigma,
                              phases=phases, model=model)
-        return Recording(meta, self._signals.table())
+
+    def recording(self) -> Recording:
+        """What has been recorded so far, in the schema (DESIGN.md §4)."""
+        return Recording(self.meta(), self._signals.table())
 
     def close(self) -> Path:
-        """Write signals.parquet and meta.json, finish the rerun file; returns the folder."""
-        write_recording(self.folder, self.recording())
-        self._poses.send(self._rec)
-        self._rr.send_signals(self._rec, self._signals.column(ch.TIME),
-                              {c: self._signals.column(c) for c in CHANNELS if c not in (ch.TIME, ch.PHASE, SIM_TIME)})
-        self._rec.flush()
-        self._rec.disconnect()
+        """Write signals.parquet and meta.json (with :attr:`complete`, the holes and, if
+        incomplete, :attr:`ended`), finish the rerun file; returns the folder."""
+        rec, staging = self.recording(), self.folder / WRITING
+        try:
+            write_recording(staging, rec)  # whole tables first, then moved in place
+            os.replace(staging / SIGNALS_NAME, self.folder / SIGNALS_NAME)
+        finally:  # meta.json and the rerun file even when the table cannot be written
+            self._write_meta(rec.meta)
+            shutil.rmtree(staging, ignore_errors=True)
+            self._poses.send(self._rec)
+            self._rr.send_signals(self._rec, self._signals.column(ch.TIME),
+                                  {c: self._signals.column(c) for c in CHANNELS
+                                   if c not in (ch.TIME, ch.PHASE, SIM_TIME)})
+            self._rec.flush()
+            self._rec.disconnect()
         return self.folder

@@ -64,8 +64,8 @@ def _check(cls: type, given_values: dict) -> None:
         assert message and "\n" not in message, message
         return
     hints = typing.get_type_hints(cls)
-    for name in given_values:  # nothing a user gave is dropped, and each has its field's type
-        assert _holds(hints[name], getattr(cfg, name)), (name, given_values[name], getattr(cfg, name))
+    for name, value in given_values.items():  # nothing given is dropped; each has its field's type
+        assert _holds(hints[name], getattr(cfg, name)), (name, value, getattr(cfg, name))
 
 
 @FUZZ

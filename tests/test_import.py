@@ -174,7 +174,7 @@ def test_ros2_bag_joint_states_import_with_the_default_map(tmp_path, capsys) -> 
     np.testing.assert_allclose(_column(rec, "tau_J2"), 2.0 * q[:, 1], atol=1e-12)
     assert _column(rec, "time")[0] == 0.0
     assert any("panda_joint1, panda_joint2" in n for n in summary["notes"])
-    assert main(["import", str(tmp_path / "bag"), "--topic", "/nope", "--out", str(out)]) == 2
+    assert main(["import", str(tmp_path / "bag"), "--topic", "/nope", "--out", str(out), "--force"]) == 2
     assert "no sensor_msgs/msg/JointState topic '/nope'" in capsys.readouterr().err
 
 

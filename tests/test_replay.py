@@ -19,6 +19,8 @@ import numpy as np
 import psutil
 import pytest
 import rerun.blueprint as rrb
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from rerun.chunk import RrdReader
 
 from serpar.checks import browser_replay
@@ -215,3 +217,21 @@ def test_a_browser_shows_every_camera_frame(rrd, tmp_path):
         assert p.shown, p
         assert p.score > 0.9 and p.box[2] >= browser_replay.MIN_WIDTH
     assert listening((port, port + 1)) == []
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(cut=st.floats(0, 1), flip=st.integers(0, 2**31 - 1), junk=st.binary(max_size=64))
+def test_a_damaged_rrd_is_read_or_refused_in_one_line(rrd, tmp_path, cut, flip, junk):
+    """The .rrd reader under fuzzing: a cut, a flipped byte or trailing junk ends in the
+    entities and at most a note, or a one-line ConfigError; never a traceback."""
+    good = bytearray(rrd.read_bytes())
+    data = good[: max(1, int(cut * len(good)))]
+    data[flip % len(data)] ^= 0xFF
+    bad = tmp_path / "fuzzed.rrd"
+    bad.write_bytes(bytes(data) + junk)
+    try:
+        paths, note = server.entity_paths(bad)
+    except ConfigError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith(f"{bad}: not a readable rerun recording")
+        return
+    assert isinstance(paths, list) and (note is None or "\n" not in note)
