@@ -9,7 +9,7 @@ strokes and the measured poses (:class:`serpar.calibration.stewart_identificatio
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -29,13 +29,48 @@ from serpar.kinematics.stewart_kinematics import StewartGeometry, check_pose, re
 from serpar.sim import names
 from serpar.sim.scene import Scene, SceneConfig, build_scene
 
-SETTLE_S = 0.4
-"""Hold at each pose before measuring: the leg PIDs settle to ~1 um."""
 CAMPAIGN_SPEED = 0.15
 """Peak platform speed between poses [m/s]: only the resting poses are measured."""
 N_POSES, REACH_M, TILT_DEG = 60, 0.04, 5.0
 """Default pose set: with 0.05 mm / 0.02 deg mocap noise and Table 5 errors it leaves ~0.05 mm
 of error on 25 mm moves about home (0.30 mm uncalibrated); +-15 mm, +-2 deg leaves 0.3 mm."""
+
+
+@dataclass(frozen=True)
+class SettleCriterion:
+    """When a commanded pose counts as reached: the bench watches the leg encoders (the stroke
+    sensors), as a real one would, instead of a fixed clock.
+
+    The leg PIDs end a campaign move 50-180 um behind their command and close that error with
+    the integral action's slow pole (time constant kp/ki = 80 ms; measured 72 ms): a fixed 0.4 s
+    hold left 0.2-0.8 um on the legs and 1-3 um on the platform pose (the pose amplifies leg
+    errors up to ~5x), which was the in-cell calibration's 4 um floor. Settled means every leg
+    within `leg_error_m` of its command and slower than `leg_speed_m_s`, or the legs not moving
+    at all (MuJoCo has put the still platform to sleep, serpar.sim.stewart.PLATFORM_SLEEP:
+    nothing changes after that): 0.40-0.61 s after a Table 3 move (mean 0.51 s)."""
+
+    leg_error_m: float = 1e-7
+    """|stroke - command| on every leg [m]: up to ~0.5 um on the pose."""
+    leg_speed_m_s: float = 1e-6
+    """Leg speed from two encoder readings one control period apart [m/s]: the error's own
+    decay rate at leg_error_m (0.1 um / 72 ms = 1.4 um/s), so both hold at once."""
+    max_s: float = 2.0
+    """Longest hold [s] (~25 time constants); a pose that needs more is measured as it is and
+    its hold recorded at this value in :attr:`CampaignCell.settle_times`."""
+    min_s: float = 0.0
+    """Shortest hold [s]; min_s = max_s is a fixed hold."""
+
+    def __post_init__(self) -> None:
+        for name in ("leg_error_m", "leg_speed_m_s", "max_s"):
+            if not float(getattr(self, name)) > 0:
+                raise ConfigError(f"settle {name}={getattr(self, name)} must be > 0")
+        if not 0 <= self.min_s <= self.max_s:
+            raise ConfigError(f"settle min_s={self.min_s} must be within 0..max_s={self.max_s}")
+
+    @classmethod
+    def fixed(cls, seconds: float) -> SettleCriterion:
+        """A hold of `seconds` whatever the legs do."""
+        return cls(max_s=seconds, min_s=seconds)
 
 
 @dataclass(frozen=True)
@@ -97,22 +132,47 @@ class CampaignCell:
     scene: Scene
     rt: CellRuntime
     plate: PlateCommander
+    settle: SettleCriterion = field(default_factory=SettleCriterion)
+    settle_times: list[float] = field(default_factory=list)
+    """Each hold's length [s], in order."""
 
     @classmethod
-    def create(cls, scene_cfg: SceneConfig, believed: np.ndarray | None, seed: int) -> CampaignCell:
+    def create(cls, scene_cfg: SceneConfig, believed: np.ndarray | None, seed: int,
+               settle: SettleCriterion = SettleCriterion()) -> CampaignCell:
         scene = build_scene(dataclasses.replace(scene_cfg, n_conductors=0))
         rt = CellRuntime.create(scene, controller_config(noise=False), seed=seed)
         plate = PlateCommander.create(scene.model, scene.data, scene_cfg.stewart, believed)
         rt.observers.append(lambda r: plate.update(r.scene.data, r.time))
-        return cls(scene, rt, plate)
+        return cls(scene, rt, plate, settle)
 
     def settle_at(self, pos: np.ndarray, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Drive to the pose, hold SETTLE_S; (commanded strokes, true pos, true rot in the Stewart base frame)."""
+        """Drive to the pose, hold until settled; (commanded strokes, true pos, true rot in the
+        Stewart base frame)."""
         require_pose(self.plate.geometry, pos, rot)
         goal = transform(rot, pos)
-        self.rt.run(self.plate.move_to(self.scene.data, goal, self.rt.time, CAMPAIGN_SPEED) + SETTLE_S)
+        self.rt.run(self.plate.move_to(self.scene.data, goal, self.rt.time, CAMPAIGN_SPEED))
+        self.hold()
         true_pos, true_rot = platform_pose(self.scene.model, self.scene.data, names.STEWART)
         return self.plate.strokes(goal), true_pos, true_rot
+
+    def hold(self) -> float:
+        """Run the cell until the legs meet :attr:`settle` (or its max_s); returns the hold [s]."""
+        m, d, crit = self.scene.model, self.scene.data, self.settle
+        acts = list(self.plate.servo.actuator_ids)
+        adr = [m.sensor_adr[m.sensor(f"{names.STEWART}stroke{i + 1}").id] for i in range(len(acts))]
+        before, held = d.sensordata[adr].copy(), 0.0
+        while held < crit.max_s - 1e-9:
+            self.rt.step()
+            held += self.rt.dt
+            now = d.sensordata[adr].copy()
+            speed = float(np.max(np.abs(now - before))) / self.rt.dt
+            error = float(np.max(np.abs(now - d.ctrl[acts])))
+            settled = speed == 0.0 or (error <= crit.leg_error_m and speed <= crit.leg_speed_m_s)
+            if settled and held >= crit.min_s - 1e-9:
+                break
+            before = now
+        self.settle_times.append(held)
+        return held
 
 
 @dataclass(frozen=True)

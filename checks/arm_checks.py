@@ -80,7 +80,10 @@ def force_position_descent(noise: bool = True, drop: float = 0.2, duration: floa
     scene.reset()
     m, d = scene.model, scene.data
     start = PATH_GOAL + np.array([0.0, 0.0, drop])
-    d.qpos[scene.arm_qpos_adr] = solve_tcp_pose(scene, start)
+    # the home pose's TCP orientation (as Figure 1 keeps it): with the yaw left free the
+    # solver's path decides it, and some scipy versions turn joint 7 onto its limit
+    home_rot = d.site_xmat[m.site(names.ARM + TCP_SITE).id].reshape(3, 3).copy()
+    d.qpos[scene.arm_qpos_adr] = solve_tcp_pose(scene, start, rotation=home_rot)
     mujoco.mj_forward(m, d)
     ctrl = ArmController(m, names.ARM, controller_config(noise), seed)
     ctrl.hold_joints(d.qpos[scene.arm_qpos_adr].copy())

@@ -147,7 +147,7 @@ class ArmController:
         meas = self.sensors.read(model, data, self.dt)
         self.measurement = meas
         self.nominal.load(meas.q, meas.dq)
-        self.estimator.update(self.nominal, meas.dq, meas.tau_J, self.dt)
+        self.estimator.update(self.nominal, meas.tau_J, self.dt)
         if self.law is ControlLaw.JOINT_PD:
             if self.q_target is None:
                 self.q_target = meas.q.copy()

@@ -68,6 +68,13 @@ class ArmSensors:
         self.index, self.config = index, config
         self._rng = np.random.default_rng(seed)
         self.bias = self._rng.normal(0.0, config.torque_bias_std, len(index.dof))
+        self._latched: Vec | None = None
+
+    def latch(self, torque: Vec) -> None:
+        """The torque sensors' reading for the next :meth:`read` (the mean over the control
+        period that just ended, from :class:`TorqueADC`); without it a read samples the torque
+        MuJoCo computed at the start of the last physics substep."""
+        self._latched = torque
 
     def read(self, model: mujoco.MjModel, data: mujoco.MjData, dt: float) -> ArmMeasurement:
         """Sample the sensors of the plant `data`; `dt` is the time since the last read."""
@@ -75,10 +82,58 @@ class ArmSensors:
         n = len(idx.dof)
         if cfg.torque_bias_walk > 0:
             self.bias += rng.normal(0.0, cfg.torque_bias_walk * np.sqrt(dt), n)
-        tau = data.sensordata[idx.torque_adr] + self.bias
+        raw, self._latched = (data.sensordata[idx.torque_adr] if self._latched is None
+                              else self._latched), None
+        tau = raw + self.bias
         if cfg.torque_noise_std > 0:
             tau = tau + rng.normal(0.0, cfg.torque_noise_std, n)
         dq = data.qvel[idx.dof].copy()
         if cfg.velocity_noise_std > 0:
             dq += rng.normal(0.0, cfg.velocity_noise_std, n)
         return ArmMeasurement(quantise(data.qpos[idx.qpos], cfg.encoder_counts_per_rev), dq, tau)
+
+
+class TorqueADC:
+    """The joint torque sensors' integrating ADC: the mean over each control period.
+
+    MuJoCo's semi-implicit step is a leapfrog: the torque computed at the start of substep n
+    acts on the motion as if centred on t_n, and the sensors sample it there. The runtime
+    centres each command switch on the period's start t_k (the first substep gets the mean of
+    the old and new command), so that sample is the mean of the torques either side of the
+    switch, while the period [t_k, t_k+1] holds only the new command. The period mean is the
+    trapezoid over the substep starts with each end taken from its own side: the start
+    extrapolated back from the samples after it, the end (not yet sampled when the next
+    command is chosen) forward from the samples before it, both linearly over 0.1 ms
+    (error ~ h^2 times the torque's curvature). With n substeps the weights are
+    (0, 2, 1/2, 1, ..., 1, 1/2, 2) / n: centred on the period's middle, summing to one.
+    A plain mean of the samples (or one sample) reads 25-50 us late or early against the
+    period mean the diagnosis assumes (diagnosis/arm_dynamics_signals.py), which an
+    effect-free episode then shows as sensor timing."""
+
+    def __init__(self, index: ArmIndex, substeps: int) -> None:
+        if substeps < 4:
+            raise ConfigError(f"TorqueADC needs >= 4 physics substeps per control period, got {substeps}")
+        adr = np.asarray(index.torque_adr)
+        stride = int(adr[1] - adr[0]) if len(adr) > 1 else 1
+        # a strided view when the sensors are evenly spaced: read without a copy per substep
+        self._even = len(adr) > 1 and stride > 0 and bool(np.all(np.diff(adr) == stride))
+        self._adr, self._slice = adr, slice(int(adr[0]), int(adr[-1]) + 1, stride)
+        w = np.ones(substeps)
+        w[0], w[1], w[2] = 0.0, 2.0, 0.5
+        w[-2], w[-1] = 0.5, 2.0
+        self.weights = w / substeps
+        self._sum = np.zeros(len(adr))
+        self._n = 0
+
+    def sample(self, data: mujoco.MjData, substep: int) -> None:
+        """After physics substep `substep` (0-based) of the period: its start's torque."""
+        if substep == 0:
+            self._sum[:] = 0.0  # weight 0: the switch sample; a new period starts
+        else:
+            reading = data.sensordata[self._slice] if self._even else data.sensordata[self._adr]
+            self._sum += self.weights[substep] * reading
+        self._n = substep + 1
+
+    def mean(self) -> Vec | None:
+        """The period's mean torque, or None before a whole period was sampled."""
+        return self._sum.copy() if self._n == len(self.weights) else None

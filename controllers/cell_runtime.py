@@ -16,8 +16,9 @@ import mujoco
 import numpy as np
 
 from serpar.controllers.arm_controller import ArmController, ArmControllerConfig
+from serpar.controllers.arm_sensors import TorqueADC
 from serpar.controllers.stewart_servo import StewartServo
-from serpar.errors import UnstableSimulation
+from serpar.errors import ConfigError, UnstableSimulation
 from serpar.sim import names
 from serpar.sim.arm import FINGER_JOINT_NAMES, GRIP_ACTUATOR, GRIP_FORCE_MAX
 from serpar.sim.scene import Scene
@@ -84,7 +85,13 @@ class CellRuntime:
     substep_probe: Callable[[], None] | None = None
     """Called after every physics substep when set (e.g. to average a contact force over the
     control period the way a 1 kHz sensor integrates it); None keeps the fast path."""
+    load_mass: float = 0.0
+    load_com: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """The load the task says the hand carries (libfranka's setLoad: mass [kg], centre of mass
+    in the flange frame [m]); recorded as m_load / F_x_Cload, so a diagnosis's nominal model
+    carries it too. The controllers' model leaves it out (grams, at these parts)."""
     _warnings: int = 0
+    _adc: TorqueADC | None = None
 
     @classmethod
     def create(cls, scene: Scene, arm_config: ArmControllerConfig, seed: int,
@@ -103,28 +110,53 @@ class CellRuntime:
         return self.arm.dt
 
     def step(self) -> None:
-        """One control period."""
+        """One control period, sampled like the real arm: q and dq at its start, tau_J the
+        mean over the period that just ended (:class:`TorqueADC`), the command held over it
+        from its start."""
         m, d = self.scene.model, self.scene.data
+        if self._adc is None:
+            self._adc = TorqueADC(self.arm.index, self.arm.substeps)
+        period_mean = self._adc.mean()
+        if period_mean is not None:
+            self.arm.sensors.latch(period_mean)
+        motors = self.arm.index.actuators
+        held = d.ctrl[motors]  # a copy: the command of the period that ends now
         self.arm.update(m, d)
         self.gripper.update(d)
-        if self.substep_probe is None:
-            mujoco.mj_step(m, d, nstep=self.arm.substeps)
-        else:
-            for _ in range(self.arm.substeps):
-                mujoco.mj_step(m, d)
-                self.substep_probe()
+        new = d.ctrl[motors]
+        # The leapfrog step lets the force of a substep act as if centred on its start, so a
+        # command switched at t_k would act half a substep early; the substep on which it
+        # switches gets the mean of the old and new command, which centres the switch on t_k.
+        d.ctrl[motors] = 0.5 * (held + new)
+        probe, adc = self.substep_probe, self._adc
+        for s in range(self.arm.substeps):
+            mujoco.mj_step(m, d)
+            adc.sample(d, s)
+            if s == 0:
+                d.ctrl[motors] = new
+            if probe is not None:
+                probe()
         self.time += self.arm.dt
         self._check_health()
         for observer in self.observers:
             observer(self)
+
+    def set_load(self, mass: float, com_in_flange: np.ndarray | None = None) -> None:
+        """Declare the carried load, as libfranka's ``setLoad`` (0: nothing in the hand)."""
+        if not (math.isfinite(mass) and mass >= 0):
+            raise ConfigError(f"load mass {mass} kg: must be finite and >= 0")
+        self.load_mass = float(mass)
+        self.load_com = np.zeros(3) if com_in_flange is None else np.asarray(com_in_flange, float)
 
     def run(self, seconds: float) -> None:
         for _ in range(round(seconds / self.dt)):
             self.step()
 
     def reset_health(self) -> None:
-        """Forget counted warnings (after the state was restored from a snapshot)."""
+        """Forget counted warnings and the torque sensors' running period (after the state
+        was restored from a snapshot or the scene recompiled: the next reading is a sample)."""
         self._warnings = 0
+        self._adc = None
 
     def _check_health(self) -> None:
         d = self.scene.data

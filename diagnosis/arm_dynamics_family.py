@@ -75,10 +75,12 @@ class ArmDynamicsFamily:
     kind = KIND
 
     def __init__(self, terms: Terms, dynamics: ArmDynamics, cfg: ArmDynamicsConfig,
-                 phases: tuple[tuple[str, float, float], ...] = ()) -> None:
+                 phases: tuple[tuple[str, float, float], ...] = (), tare_walk: float = 0.0) -> None:
         self.terms, self.cfg = terms, cfg
         self.baseline: Effect | None = BASELINE
         self._knots: Vec | None = None
+        self._tare_walk = tare_walk
+        self._tare_var: Vec | None = None
         if cfg.tare_knot_s is not None:
             self.pin_tare_knots(np.arange(len(terms.time)))
         self.channels = CHANNELS if terms.has_command else ch.TAU_J
@@ -111,6 +113,8 @@ class ArmDynamicsFamily:
         else:
             sigma_link, sigma_drive = row_sigma(t.measurement_var, t.acc_var,
                                                 t.mass_link[rows] + added, t.mass_full[rows] + added)
+        if self._tare_var is not None:
+            sigma_link = np.sqrt(sigma_link**2 + self._tare_var[rows, None])
         if not t.has_command:
             return (link / sigma_link).ravel()
         return np.hstack([link / sigma_link, drive / sigma_drive]).ravel()
@@ -126,7 +130,9 @@ class ArmDynamicsFamily:
         a command, the command's; measured = the windowed recording."""
         t, n = self.terms, len(self.channels)
         channel, axis = per_row(t.time[rows], n)
-        sigma = np.hstack([t.sigma_link[rows], t.sigma_drive[rows]])[:, :n]
+        link = (t.sigma_link[rows] if self._tare_var is None
+                else np.sqrt(t.sigma_link[rows] ** 2 + self._tare_var[rows, None]))
+        sigma = np.hstack([link, t.sigma_drive[rows]])[:, :n]
         measured = np.hstack([t.link[rows] + t.tau_link_model[rows],
                               t.drive[rows] + t.tau_full_model[rows]])[:, :n]
         return UnitView(self.channels, ("N m",) * n, channel, sigma.ravel(), axis,
@@ -165,6 +171,8 @@ class ArmDynamicsFamily:
         if self.cfg.tare_knot_s is not None:
             self._knots, self.baseline = drifting_tare(self.terms.time, self.terms.time[train],
                                                        self.cfg.tare_knot_s)
+            if self._tare_walk > 0:
+                self._tare_var = bridge_variance(self.terms.time, self._knots, self._tare_walk)
 
     def _tare(self, values: Vec, rows: NDArray[np.int64]) -> Vec:
         """Per-row tares (rows, 7): constant, or interpolated between the knots."""
@@ -212,7 +220,32 @@ def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None
     terms = compute_terms(series, cfg.smoothing, dynamics)
     check_scale(terms)
     phases = tuple((p.name, p.start, p.end) for p in rec.meta.phases)
-    return ArmDynamicsFamily(terms, dynamics, cfg, phases)
+    return ArmDynamicsFamily(terms, dynamics, cfg, phases, stated_tare_walk(rec))
+
+
+def stated_tare_walk(rec: Recording) -> float:
+    """The torque sensors' bias random walk [N m/sqrt(s)] the recording states as part of its
+    noise model (``model.arm_sensors.torque_bias_walk``, as `serpar run --record` writes it),
+    0 when it states none."""
+    sensors = rec.meta.model.get("arm_sensors")
+    walk = sensors.get("torque_bias_walk", 0.0) if isinstance(sensors, dict) else 0.0
+    return float(walk) if isinstance(walk, (int, float)) and np.isfinite(walk) and walk > 0 else 0.0
+
+
+def bridge_variance(time: Vec, knots: Vec, walk: float) -> Vec:
+    """Per row, the variance of a random-walk tare (intensity `walk`) about the piecewise-linear
+    tare through `knots`: a Brownian bridge between two knots, w^2 (t - a)(b - t)/(b - a), and
+    a free walk beyond the end knots, where the tare is held constant. It belongs to the
+    stated noise: a held-out row's tare is interpolated across a block no training row pins."""
+    if len(knots) == 0:
+        return np.full(len(time), walk**2 * (time[-1] - time[0]))
+    i = np.clip(np.searchsorted(knots, time), 1, max(len(knots) - 1, 1))
+    a, b = knots[i - 1], knots[np.minimum(i, len(knots) - 1)]
+    inside = (time >= knots[0]) & (time <= knots[-1]) & (b > a)
+    var = np.where(inside, (time - a) * (b - time) / np.where(b > a, b - a, 1.0), 0.0)
+    var = np.where(time < knots[0], knots[0] - time, var)
+    var = np.where(time > knots[-1], time - knots[-1], var)
+    return walk**2 * var
 
 
 def drifting_tare(time: Vec, pinned_by: Vec, spacing_s: float) -> tuple[Vec, Effect]:

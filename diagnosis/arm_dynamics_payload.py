@@ -43,6 +43,21 @@ def set_payload(model: mujoco.MjModel, body: int, p: Vec) -> None:
     mujoco.mju_mat2Quat(model.body_iquat[body], axes.ravel())
 
 
+def load_torque(q: Vec, dq: Vec, ddq: Vec, load: Vec) -> Vec:
+    """samples x 7: the torque of a declared load (rows of mass, CoM in the flange frame; a
+    point mass, as libfranka's m_load / F_x_Cload without I_load) on the arm's motion."""
+    out = np.zeros_like(q)
+    held = load[:, 0] > 0
+    if not held.any():
+        return out
+    dyn, body = payload_model()
+    for values in np.unique(load[held], axis=0):  # the load changes only at grasp and release
+        rows = held & np.all(load == values, axis=1)
+        set_payload(dyn.model, body, np.r_[values, np.zeros(6)])
+        out[rows] = dyn.link_torque(q[rows], dq[rows], ddq[rows])
+    return out
+
+
 def payload_model() -> tuple[ArmDynamics, int]:
     """The arm with a payload body on link 7 and every other body massless: its inverse
     dynamics is the payload's torque alone (body set by :func:`set_payload`)."""

@@ -74,6 +74,9 @@ class ArmSeries:
     sigma_tau: Vec
     sigma_cmd: Vec
     """Noise of the delivered torque about the command (the drive's torque ripple)."""
+    load: Vec | None = None
+    """samples x 4: the load the controller was told of (m_load, F_x_Cload1..3), part of the
+    nominal model; None when the recording does not log it."""
 
 
 def _column(rec: Recording, name: str) -> Vec:
@@ -140,7 +143,23 @@ def read_arm_series(rec: Recording) -> ArmSeries:
     cmd = np.column_stack([_column(rec, c) for c in ch.TAU_J_D]) if present else None
     sigma_tau = _sigmas(rec, ch.TAU_J, None)
     return ArmSeries(t, rate, q, tau, cmd, _sigmas(rec, ch.Q, None), sigma_tau,
-                     _sigmas(rec, ch.TAU_J_D, sigma_tau))
+                     _sigmas(rec, ch.TAU_J_D, sigma_tau), _load(rec, cols))
+
+
+def _load(rec: Recording, cols: set[str]) -> Vec | None:
+    """The declared load (libfranka m_load, F_x_Cload) per sample, or None when not logged."""
+    names = (ch.M_LOAD, *ch.F_X_CLOAD)
+    present = [c for c in names if c in cols]
+    if not present:
+        return None
+    if len(present) < len(names):
+        raise IdentificationError(f"the load has {', '.join(present)} but not "
+                                  f"{', '.join(c for c in names if c not in cols)}: give m_load "
+                                  "and F_x_Cload1..3 together (libfranka's load) or none")
+    load = np.column_stack([_column(rec, c) for c in names])
+    if np.any(load[:, 0] < 0):
+        raise IdentificationError(f"m_load is negative at row {int(np.argmax(load[:, 0] < 0))}: a mass is >= 0")
+    return load
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from scipy.interpolate import BSpline, make_interp_spline
 from scipy.ndimage import correlate1d
 
+from serpar.diagnosis.arm_dynamics_payload import load_torque
 from serpar.diagnosis.arm_dynamics_signals import (
     ArmSeries,
     Rows,
@@ -38,7 +39,7 @@ from serpar.diagnosis.arm_dynamics_signals import (
     full_rate_derivatives,
     noise_gains,
 )
-from serpar.sim.rigid_arm import ArmDynamics
+from serpar.sim.rigid_arm import ArmDynamics, DynamicsSeries
 
 Vec = NDArray[np.float64]
 
@@ -98,6 +99,9 @@ def compute_terms(series: ArmSeries, cfg: SmoothingConfig | None = None,
     rows = Rows.of(len(series.time), cfg)
     v, a = full_rate_derivatives(series.q, series.rate)
     model = dyn.series(series.q, v, a)  # every sample: the model is linear in the raw q̈
+    if series.load is not None:  # the load the controller was told of is nominal, not missing
+        known = load_torque(series.q, v, a, series.load)
+        model = DynamicsSeries(model.link + known, model.full + known)
     link = rows.at(series.tau_J) - rows.link_at(model.link)
     if series.tau_J_d is None:  # no command: a drive channel of zeros that nothing reads
         cmd_mean = model.full

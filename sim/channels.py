@@ -26,6 +26,10 @@ TAU_J_D = numbered("tau_J_d", 7)
 """Commanded joint torques [N m]."""
 F_EXT = numbered("O_F_ext_hat_K", 6)
 """Estimated external wrench at the TCP, base frame [N, N m]."""
+M_LOAD = "m_load"
+"""Mass of the load the controller was told the hand carries (libfranka setLoad) [kg]."""
+F_X_CLOAD = numbered("F_x_Cload", 3)
+"""That load's centre of mass in the flange frame [m] (libfranka F_x_Cload)."""
 TCP_POSITION = ("O_T_EE_x", "O_T_EE_y", "O_T_EE_z")
 TCP_QUAT = ("O_T_EE_qw", "O_T_EE_qx", "O_T_EE_qy", "O_T_EE_qz")
 
@@ -42,9 +46,9 @@ PLATFORM_QUAT = ("platform_qw", "platform_qx", "platform_qy", "platform_qz")
 GRIPPER_WIDTH = "gripper_width"
 CONTACT_FORCE = ("contact_force_x", "contact_force_y", "contact_force_z")
 
-KNOWN = (TIME, PHASE, *Q, *DQ, *TAU_J, *TAU_J_D, *F_EXT, *TCP_POSITION, *TCP_QUAT, *LEG_CMD, *LEG,
+KNOWN = (TIME, PHASE, *Q, *DQ, *TAU_J, *TAU_J_D, *F_EXT, M_LOAD, *F_X_CLOAD, *TCP_POSITION, *TCP_QUAT, *LEG_CMD, *LEG,
          *PLATFORM_POSITION, *PLATFORM_QUAT, GRIPPER_WIDTH, *CONTACT_FORCE)
-KNOWN_HELP = ("time, phase, q1..7, dq1..7, tau_J1..7, tau_J_d1..7, O_F_ext_hat_K1..6, "
+KNOWN_HELP = ("time, phase, q1..7, dq1..7, tau_J1..7, tau_J_d1..7, O_F_ext_hat_K1..6, m_load, F_x_Cload1..3, "
               "O_T_EE_x/y/z/qw/qx/qy/qz, leg_cmd1..6, leg1..6, platform_x/y/z/qw/qx/qy/qz, "
               "gripper_width, contact_force_x/y/z, x_<anything>")
 
@@ -64,7 +68,8 @@ _QUAT_MAX = (1.01, "(unit quaternion)")
 PLAUSIBLE_MAX: dict[str, tuple[float, str]] = {
     **dict.fromkeys(Q, (2 * math.pi + 0.1, "rad")), **dict.fromkeys(DQ, (20.0, "rad/s")),
     **dict.fromkeys(TAU_J, _TAU_MAX), **dict.fromkeys(TAU_J_D, _TAU_MAX),
-    **dict.fromkeys(F_EXT, (1e4, "N or N m")), **dict.fromkeys(TCP_POSITION, _LENGTH_MAX),
+    **dict.fromkeys(F_EXT, (1e4, "N or N m")), M_LOAD: (50.0, "kg"), **dict.fromkeys(F_X_CLOAD, (2.0, "m")),
+    **dict.fromkeys(TCP_POSITION, _LENGTH_MAX),
     **dict.fromkeys(TCP_QUAT, _QUAT_MAX), **dict.fromkeys(LEG_CMD, (2.0, "m")),
     **dict.fromkeys(LEG, (2.0, "m")), **dict.fromkeys(PLATFORM_POSITION, _LENGTH_MAX),
     **dict.fromkeys(PLATFORM_QUAT, _QUAT_MAX), GRIPPER_WIDTH: (1.0, "m"),

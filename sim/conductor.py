@@ -42,6 +42,18 @@ class ConductorConfig:
             raise ConfigError("body_length and journal_length must be > 0")
 
 
+def mass_properties(config: ConductorConfig, journal_diameter: float, body_diameter: float
+                    ) -> tuple[float, float]:
+    """(mass [kg], CoM height above the shoulder along the conductor's z [m]) of a conductor
+    of these diameters: the body and journal cylinders (the tip chamfer's few micrograms left
+    out). What a cell's task knows of the part it carries, from the drawing."""
+    lb, lj = config.body_length, config.journal_length
+    m_body = config.density * np.pi * body_diameter**2 / 4 * lb
+    m_journal = config.density * np.pi * journal_diameter**2 / 4 * lj
+    mass = m_body + m_journal
+    return float(mass), float((m_body * lb / 2 - m_journal * lj / 2) / mass)
+
+
 def _frustum_vertices(r_top: float, r_bottom: float, z_top: float, z_bottom: float, n: int):
     a = np.linspace(0, 2 * np.pi, n, endpoint=False)
     top = np.c_[r_top * np.cos(a), r_top * np.sin(a), np.full(n, z_top)]

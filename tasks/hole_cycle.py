@@ -14,8 +14,11 @@ import numpy as np
 
 from serpar.controllers.cell_runtime import CellRuntime
 from serpar.kinematics.rotations import so3_exp
+from serpar.sim.arm import TCP_OFFSET
+from serpar.sim.conductor import mass_properties
 from serpar.sim.poses import GRASP_HEIGHT
 from serpar.sim.scene import Scene
+from serpar.sim.tolerances import JOURNAL_H6
 from serpar.tasks.motions import move_tcp, tcp_pose
 from serpar.vision.inhand import InHandMeasurement
 from serpar.vision.tray_conductors import ConductorSighting
@@ -67,8 +70,17 @@ def pick(rt: CellRuntime, sighting: ConductorSighting, body_diameter: float) -> 
     rt.gripper.grasp(GRASP_SQUEEZE)
     rt.run(0.25)
     width = rt.gripper.width(rt.scene.data)
+    if width > 0.5 * body_diameter:  # a part in the hand: tell the controller its load
+        rt.set_load(*nominal_load(rt.scene, body_diameter))
     move_tcp(rt, grasp_tcp + LIFT * sighting.axis, HAND_DOWN, speed=FINE_SPEED, settle_s=0.0)
     return width
+
+
+def nominal_load(scene: Scene, body_diameter: float) -> tuple[float, np.ndarray]:
+    """The held conductor as a load (mass, CoM in the flange frame) from its drawing and the
+    nominal grasp: the pads' centre GRASP_HEIGHT above the shoulder, the part along the TCP z."""
+    mass, com_above_shoulder = mass_properties(scene.config.conductor, JOURNAL_H6.nominal, body_diameter)
+    return mass, np.array([0.0, 0.0, TCP_OFFSET + GRASP_HEIGHT - com_above_shoulder])
 
 
 def inspection_tcp(scene: Scene, roll: float = INSPECT_ROLL) -> np.ndarray:
@@ -88,5 +100,6 @@ def release(rt: CellRuntime, body_diameter: float) -> None:
     """Open the hand on the seated part and back off along the TCP z."""
     rt.gripper.open_to(body_diameter + OPEN_MARGIN)
     rt.run(0.15)
+    rt.set_load(0.0)
     pos, rot = tcp_pose(rt)
     move_tcp(rt, pos - 0.015 * rot[:, 2], rot, speed=FINE_SPEED * 2, settle_s=0.0)
