@@ -47,7 +47,7 @@ entry chamfers 0.1 mm each (sim/conductor.py, sim/baseplate.py), with 0.1 mm eit
 PRE_CONTACT_M = 2.0e-3
 """Samples of the insert phase this far above the seat are the approach: no contact."""
 CONTACT_N = 0.4
-"""|estimate| above this is contact (about 4x the estimate's noise per axis)."""
+"""|estimate| above this is contact (about 20x the momentum observer's noise per axis at rest)."""
 SEATED_N = 2.0
 """The insertion ended seated when the axial estimate of its last 0.1 s exceeds this."""
 MIN_SLIDE = 20
