@@ -132,10 +132,10 @@ class CellRuntime:
         for s in range(self.arm.substeps):
             mujoco.mj_step(m, d)
             adc.sample(d, s)
-            if s == 0:
-                d.ctrl[motors] = new
             if probe is not None:
                 probe()
+            if s == 0:  # after the switch substep: the command alone
+                d.ctrl[motors] = new
         self.time += self.arm.dt
         self._check_health()
         for observer in self.observers:

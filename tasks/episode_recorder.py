@@ -36,8 +36,8 @@ from serpar.sim.recording import (
 )
 from serpar.sim.scene import Scene
 from serpar.sim.seat_lock import PLATE_BODY
-from serpar.tasks import rerun_scene
 from serpar.sim.strict_json import dumps
+from serpar.tasks import rerun_scene
 
 POSE_HZ = 50.0
 """Body poses for the rerun file (the signals are at the control rate)."""

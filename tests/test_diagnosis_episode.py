@@ -100,7 +100,7 @@ def test_frictionless_episode_says_no_missing_physics(episodes) -> None:
 def test_the_carried_part_is_declared_as_the_load(episodes) -> None:
     """m_load is the conductor's nominal mass from grasp to release and 0 otherwise; without
     it the part's weight (1.7 g at ~0.6 m: ~0.01 N m on joint 2) is structure in the residual."""
-    rec, family, diag = episodes["none"]
+    rec, _, diag = episodes["none"]
     m_load = rec.column("m_load")
     phase = np.array(rec.signals.column("phase").to_pylist())
     held = np.isin(phase, ("inspect", "align", "insert"))
@@ -125,7 +125,7 @@ def test_frictionless_episode_does_not_find_joint_friction(episodes) -> None:
 def test_against_the_cell_config_the_friction_is_no_longer_missing(episodes, tmp_path) -> None:
     """``serpar diagnose REC --model cell.yaml``: the cell the config builds (its arm friction)
     is the nominal model, so what was the top finding is explained before any fit."""
-    rec, family, blind = episodes["friction"]
+    _, family, blind = episodes["friction"]
     cell = tmp_path / "cell.yaml"
     cell.write_text("holes: [14]\narm_friction: 0.3\n")
     diag = diagnose(PriorFamily(family, model_from_episode_config(cell)), 0)

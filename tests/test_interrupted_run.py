@@ -227,7 +227,7 @@ def test_first_run_calibrations_report_progress_through_the_callers_stage(monkey
     from serpar.cli.output import stage
 
     monkeypatch.setenv("SERPAR_CACHE", str(tmp_path))
-    camera = SimpleNamespace(as_dict=lambda: {})
+    camera = SimpleNamespace(as_dict=dict)
     monkeypatch.setattr(camera_cache, "calibrate", lambda *a, **k: SimpleNamespace(
         calibration=SimpleNamespace(pair=SimpleNamespace(left=camera, right=camera)), score={}, views=9))
     seen = []

@@ -73,7 +73,7 @@ def test_render_refuses_an_existing_png_before_rendering_and_force_replaces_it(t
 def test_run_record_refuses_an_existing_episode_folder_at_once(tmp_path) -> None:
     """Before any calibration or episode: a subprocess, so nothing is cached in-process."""
     (tmp_path / "rec" / "episode_0").mkdir(parents=True)
-    r = subprocess.run([sys.executable, "-m", "serpar", "run", "--holes", "1", "--record", str(tmp_path / "rec")],
+    r = subprocess.run([sys.executable, "-m", "serpar", "run", "--holes", "1", "--record", str(tmp_path / "rec")], check=False,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and r.stdout == ""
     lines = r.stderr.strip().splitlines()
