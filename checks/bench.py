@@ -18,6 +18,7 @@ import numpy as np
 from serpar.checks.arm_checks import DOWN, press_setup
 from serpar.controllers.arm_controller import ArmController, ControlLaw, controller_config
 from serpar.controllers.arm_laws import CartesianTarget, ForceTarget
+from serpar.controllers.cell_runtime import CellRuntime
 from serpar.controllers.trajectory import LineMove
 from serpar.errors import ConfigError
 from serpar.sim.physics import PhysicsConfig
@@ -77,32 +78,61 @@ def bare_rate(scene_config: SceneConfig, cfg: BenchConfig) -> Rate:
     return _best(run, _snapshot(scene), n, m.opt.timestep, cfg.repeats)
 
 
-def _loop_vs_bare(scene: Scene, ctrl: ArmController, command: Callable[[float], None],
-                  cfg: BenchConfig) -> dict[str, object]:
-    """The control loop, then bare `mj_step` replaying the loop's own controls from the same
-    state: the same trajectory, contacts and sleeping, so the ratio is the loop's cost alone.
-    (Frozen controls let the arm drift off its contact: a cheaper, other simulation.)"""
-    m, d = scene.model, scene.data
-    periods = round(cfg.sim_seconds / ctrl.dt)
-    n = periods * ctrl.substeps
-    restore = _snapshot(scene)
-    controls = np.empty((periods, m.nu))
+def _loop_vs_bare(rt: CellRuntime, command: Callable[[float], None], cfg: BenchConfig) -> dict[str, object]:
+    """serpar's control loop (`CellRuntime.step`: sensors, wrench estimate, control law, gripper,
+    collision gate, health check), then bare `mj_step` replaying the loop's own controls and
+    gate decisions from the same state (the same trajectory bit for bit, contacts and sleeping:
+    the ratio is the loop's own cost), then the same replay on the cell as built (every geom
+    in the broad phase: what the gate saves). Frozen controls would let the arm drift off its
+    contact: a cheaper, other simulation."""
+    m, d = rt.scene.model, rt.scene.data
+    gate = rt.gate
+    assert gate is not None
+    periods, substeps = round(cfg.sim_seconds / rt.dt), rt.arm.substeps
+    motors = rt.arm.index.actuators
+    n = periods * substeps
+    saved = mujoco.MjData(m)
+    mujoco.mj_copyData(saved, m, d)
+    controls, gated = np.empty((periods, m.nu)), np.empty((periods, len(gate.groups)), bool)
+
+    def restore() -> None:
+        mujoco.mj_copyData(d, m, saved)
+        rt.reset_health()
 
     def loop() -> None:
         for k in range(periods):
-            command(k * ctrl.dt)
-            ctrl.step(m, d)
+            command(k * rt.dt)
+            rt.step()
             controls[k] = d.ctrl
+            gated[k] = [g.on for g in gate.groups]
 
-    def bare() -> None:
-        for k in range(periods):
-            d.ctrl[:] = controls[k]
-            mujoco.mj_step(m, d, nstep=ctrl.substeps)
+    def replay(with_gate: bool) -> Callable[[], None]:
+        def run() -> None:
+            held = saved.ctrl.copy()
+            for k in range(periods):
+                if with_gate:
+                    gate.set_on(gated[k])
+                d.ctrl[:] = controls[k]
+                d.ctrl[motors] = 0.5 * (held[motors] + controls[k][motors])  # the centred switch
+                mujoco.mj_step(m, d)
+                d.ctrl[:] = controls[k]
+                mujoco.mj_step(m, d, nstep=substeps - 1)
+                held = controls[k]
+        return run
 
     looped = _best(loop, restore, n, m.opt.timestep, cfg.repeats)
-    floor = _best(bare, restore, n, m.opt.timestep, cfg.repeats)
-    return {"loop": looped.as_dict(), "bare": floor.as_dict(),
-            "overhead": floor.steps_per_s / looped.steps_per_s}
+    end = d.qpos.copy()
+    floor = _best(replay(True), restore, n, m.opt.timestep, cfg.repeats)
+    identical = bool(np.array_equal(end, d.qpos))
+    built = _best(replay(False), restore, n, m.opt.timestep, cfg.repeats)
+    return {"loop": looped.as_dict(), "bare": floor.as_dict(), "bare_as_built": built.as_dict(),
+            "overhead": floor.steps_per_s / looped.steps_per_s,
+            "vs_as_built": built.steps_per_s / looped.steps_per_s,
+            "replay_identical": identical, "gated_share": float(1 - gated.mean())}
+
+
+def _runtime(scene: Scene, ctrl: ArmController) -> CellRuntime:
+    return CellRuntime.create(scene, ctrl.config, seed=0, arm=ctrl, transit=False)  # steps/s at the fine step
 
 
 def free_motion(cfg: BenchConfig) -> dict[str, object]:
@@ -115,7 +145,8 @@ def free_motion(cfg: BenchConfig) -> dict[str, object]:
         ctrl.step(m, d)
     pos, rot = ctrl.nominal.tcp_pose()
     move = LineMove(pos, pos + np.array([0.05, 0.08, -0.03]), rot, cfg.sim_seconds)
-    return _loop_vs_bare(scene, ctrl, lambda t: ctrl.track(move.at(t), ControlLaw.IMPEDANCE), cfg)
+    rt = _runtime(scene, ctrl)
+    return _loop_vs_bare(rt, lambda t: ctrl.track(move.at(t), ControlLaw.IMPEDANCE), cfg)
 
 
 def in_contact(cfg: BenchConfig) -> dict[str, object]:
@@ -126,13 +157,15 @@ def in_contact(cfg: BenchConfig) -> dict[str, object]:
     rot = d.site_xmat[m.site("arm/tcp").id].reshape(3, 3).copy()
     held = CartesianTarget(contact_tcp - np.array([0, 0, 5e-4]), rot)
     force = ForceTarget(DOWN, 5.0)
+    rt = _runtime(scene, ctrl)
+    rt.gripper.grasp(20.0)  # the squeeze press_setup set
     # 1.5 s: the law starts 1 mm above the plate; the speed-limited approach lands at ~3 mm/s,
     # the push overshoots to ~7 N and settles to 5 N within ~1 s.
     for _ in range(round(max(cfg.settle_s, 1.5) / ctrl.dt)):
         ctrl.track(held, ControlLaw.FORCE_POSITION, force)
-        ctrl.step(m, d)
+        rt.step()
     push = ctrl.measured_push()
-    report = _loop_vs_bare(scene, ctrl, lambda t: ctrl.track(held, ControlLaw.FORCE_POSITION, force), cfg)
+    report = _loop_vs_bare(rt, lambda t: ctrl.track(held, ControlLaw.FORCE_POSITION, force), cfg)
     return {**report, "push_n": push}
 
 

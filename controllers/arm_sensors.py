@@ -113,14 +113,18 @@ class TorqueADC:
     def __init__(self, index: ArmIndex, substeps: int) -> None:
         if substeps < 4:
             raise ConfigError(f"TorqueADC needs >= 4 physics substeps per control period, got {substeps}")
+        # (with 4 the two inner corrections fall on one sample: weights (0, 2, 0, 2) / 4)
         adr = np.asarray(index.torque_adr)
         stride = int(adr[1] - adr[0]) if len(adr) > 1 else 1
         # a strided view when the sensors are evenly spaced: read without a copy per substep
         self._even = len(adr) > 1 and stride > 0 and bool(np.all(np.diff(adr) == stride))
         self._adr, self._slice = adr, slice(int(adr[0]), int(adr[-1]) + 1, stride)
         w = np.ones(substeps)
-        w[0], w[1], w[2] = 0.0, 2.0, 0.5
-        w[-2], w[-1] = 0.5, 2.0
+        w[0] = 0.0
+        w[1] += 1.0  # half the start value, extrapolated back: 2 x[1] - x[2], halved
+        w[2] -= 0.5
+        w[-1] += 1.0  # half the end value, extrapolated forward: 2 x[n-1] - x[n-2], halved
+        w[-2] -= 0.5
         self.weights = w / substeps
         self._sum = np.zeros(len(adr))
         self._n = 0

@@ -21,11 +21,17 @@ from serpar.controllers.stewart_servo import StewartServo
 from serpar.errors import ConfigError, UnstableSimulation
 from serpar.sim import names
 from serpar.sim.arm import FINGER_JOINT_NAMES, GRIP_ACTUATOR, GRIP_FORCE_MAX
+from serpar.sim.collision_gate import CollisionGate
 from serpar.sim.scene import Scene
 from serpar.sim.stewart import MAX_JOINT_ERROR
+from serpar.sim.transit_step import TransitStep
 
 MAX_SPEED = 100.0
 """Any joint or part faster than this [m/s or rad/s] means the integration blew up."""
+GATE_EVERY = 5
+"""Control periods between two decisions of the collision gate (sim/collision_gate.py): one
+decision costs ~55 us of numpy, and its margin grows with what moved since the last one."""
+GATED_BODIES = (names.PLATE + "baseplate", names.TRAY + "tray")
 
 
 @dataclass
@@ -90,20 +96,47 @@ class CellRuntime:
     """The load the task says the hand carries (libfranka's setLoad: mass [kg], centre of mass
     in the flange frame [m]); recorded as m_load / F_x_Cload, so a diagnosis's nominal model
     carries it too. The controllers' model leaves it out (grams, at these parts)."""
+    gate: CollisionGate | None = None
+    """Keeps the plate and the tray out of collision detection while nothing can reach them
+    (no change to any contact; None: always in)."""
+    transit: TransitStep | None = None
+    """The transit step while the gate has everything out (sim/transit_step.py); None: the fine
+    step throughout."""
     _warnings: int = 0
     _adc: TorqueADC | None = None
+    _adcs: dict[int, TorqueADC] = field(default_factory=dict)
+    _gate_tick: int = 0
 
     @classmethod
     def create(cls, scene: Scene, arm_config: ArmControllerConfig, seed: int,
-               stewart: StewartServo | None = None) -> CellRuntime:
+               stewart: StewartServo | None = None, gate: bool = True,
+               arm: ArmController | None = None, transit: bool = True) -> CellRuntime:
         """Controllers for `scene`; `stewart` defaults to the platform's nominal model (which
-        differs from a platform built with hidden joint errors by those errors)."""
+        differs from a platform built with hidden joint errors by those errors); `gate`: the
+        collision gate of the plate and the tray (bit-identical physics, fewer broad-phase boxes);
+        `arm`: a controller already running on `scene` (else a new one holding the joints);
+        `transit`: the transit step where the gate has everything out (needs the gate)."""
         if stewart is None:
             stewart = StewartServo.from_model(scene.model, scene.config.stewart.geometry(),
                                               names.STEWART, match_tol=MAX_JOINT_ERROR)
-        arm = ArmController(scene.model, names.ARM, arm_config, seed)
-        arm.hold_joints(scene.data.qpos[scene.arm_qpos_adr].copy())
-        return cls(scene, arm, GripperServo.from_model(scene.model), stewart)
+        if arm is None:
+            arm = ArmController(scene.model, names.ARM, arm_config, seed)
+            arm.hold_joints(scene.data.qpos[scene.arm_qpos_adr].copy())
+        rt = cls(scene, arm, GripperServo.from_model(scene.model), stewart)
+        if gate:
+            rt.gate = CollisionGate(scene.model, scene.data, GATED_BODIES)
+            if transit:
+                rt.transit = TransitStep(scene.model, scene.config.physics)
+            scene.on_recompile.append(rt._rebind)
+        return rt
+
+    def _rebind(self, scene: Scene) -> None:
+        """A recompiled scene: the gate and the step size start over on the new model."""
+        if self.gate is not None:
+            self.gate.bind(scene.model, scene.data)
+        if self.transit is not None:
+            self.transit.bind(scene.model)
+            self.arm.substeps = self.transit.substeps(self.arm.dt)
 
     @property
     def dt(self) -> float:
@@ -114,11 +147,20 @@ class CellRuntime:
         mean over the period that just ended (:class:`TorqueADC`), the command held over it
         from its start."""
         m, d = self.scene.model, self.scene.data
-        if self._adc is None:
-            self._adc = TorqueADC(self.arm.index, self.arm.substeps)
-        period_mean = self._adc.mean()
+        period_mean = None if self._adc is None else self._adc.mean()
         if period_mean is not None:
             self.arm.sensors.latch(period_mean)
+        if self.gate is not None:
+            self._gate_tick -= 1
+            if self._gate_tick <= 0:
+                self._gate_tick = GATE_EVERY
+                self.gate.update(d)
+            transit = self.transit
+            if transit is not None and transit.available and transit.set(
+                    not self.gate.any_on() and transit.platform_still(d)):
+                self.arm.substeps = transit.substeps(self.arm.dt)
+        self._adc = self._adcs.get(self.arm.substeps) or self._adcs.setdefault(
+            self.arm.substeps, TorqueADC(self.arm.index, self.arm.substeps))
         motors = self.arm.index.actuators
         held = d.ctrl[motors]  # a copy: the command of the period that ends now
         self.arm.update(m, d)
@@ -154,9 +196,14 @@ class CellRuntime:
 
     def reset_health(self) -> None:
         """Forget counted warnings and the torque sensors' running period (after the state
-        was restored from a snapshot or the scene recompiled: the next reading is a sample)."""
+        was restored from a snapshot or the scene recompiled: the next reading is a sample);
+        the collision gate puts everything back in until it has seen the new state move."""
         self._warnings = 0
         self._adc = None
+        if self.gate is not None:
+            self.gate.reset()
+        if self.transit is not None and self.transit.set(False):
+            self.arm.substeps = self.transit.substeps(self.arm.dt)
 
     def _check_health(self) -> None:
         d = self.scene.data

@@ -22,6 +22,10 @@ class PhysicsConfig:
 
     timestep: float = 1e-4
     """Physics step [s]. The only place the timestep is defined."""
+    transit_timestep: float | None = 2.5e-4
+    """Physics step [s] while nothing precise can happen: no body within reach of the plate or
+    the tray (sim/transit_step.py); None = always `timestep`. At most half the pads' normal time
+    constant; the control period must be a whole number of it."""
     iterations: int = 100
     ls_iterations: int = 50
     tolerance: float = 1e-10
@@ -77,6 +81,11 @@ class PhysicsConfig:
             raise ConfigError(f"noslip_iterations {self.noslip_iterations}: valid 0..1000 (0 = off)")
         if not 2.0 <= self.grip_timesteps <= 200.0:
             raise ConfigError(f"grip_timesteps {self.grip_timesteps}: valid 2..200")
+        if self.transit_timestep is not None:
+            limit = self.grip_timesteps * self.timestep / 2
+            if not self.timestep <= self.transit_timestep <= limit * (1 + 1e-9):
+                raise ConfigError(f"transit_timestep {self.transit_timestep} s: valid from timestep "
+                                  f"({self.timestep} s) to half the pads' time constant ({limit:g} s), or null")
         if not 0.0 < self.grip_friction_damping < 2.0:
             raise ConfigError(f"grip_friction_damping {self.grip_friction_damping}: valid (0, 2) "
                               "(b * timestep; 2 is the stability limit of a friction row)")
@@ -94,6 +103,15 @@ class PhysicsConfig:
         """solreffriction of the pad/conductor pairs, direct form (-stiffness, -damping): a
         friction row has no stiffness, its damping is grip_friction_damping / timestep."""
         return (0.0, -self.grip_friction_damping / self.timestep)
+
+    @property
+    def transit_grip_solreffriction(self) -> tuple[float, float]:
+        """The pads' friction damping at the transit step that leaves a held part the same drift
+        Jdot*qvel * (1/b - h/2) as the fine step: 1/b = h_t/2 + (1/b0 - h0/2)."""
+        assert self.transit_timestep is not None
+        b0 = self.grip_friction_damping / self.timestep
+        inverse = self.transit_timestep / 2 + (1 / b0 - self.timestep / 2)
+        return (0.0, -1.0 / inverse)
 
     @property
     def precision_solref(self) -> tuple[float, float]:

@@ -20,11 +20,12 @@ from serpar.calibration.stewart_campaign import N_POSES, MocapNoise, calibrate
 from serpar.calibration.stewart_params import load_stewart_parameters, save_stewart_parameters
 from serpar.tasks.episode_config import EpisodeConfig, scene_config
 
-CALIBRATION_VERSION = 4
+CALIBRATION_VERSION = 5
 """Bump when the Stewart campaign, solver or the simulated cell changes (invalidates cached
 parameter files). 2: wedge bores (lighter plate) and the commander starting from its model's
 reading of the legs in force. 3: the still platform sleeps (settles to 0.05 um first). 4: each
-pose held until the legs settle (SettleCriterion), not a fixed 0.4 s."""
+pose held until the legs settle (SettleCriterion), not a fixed 0.4 s. 5: the arm holds at the
+transit step while the platform sleeps (sim/transit_step.py)."""
 
 def campaign_file(cfg: EpisodeConfig, log: Log | None = None, stage: Stage | None = None) -> Path:
     """Identified parameters of the episode's platform (its hidden errors), from a simulated

@@ -1,0 +1,80 @@
+"""A longer physics step while nothing precise can happen: the cell's transit.
+
+The 0.1 ms step is what the journal/bore contact needs (sim/physics.py: its solref time
+constant is 2 steps, its penetration well under a micrometre). Most of a hole cycle, though, is
+free travel: the empty hand to the tray, the part carried to the inspection station and on to
+the plate. There the cell steps at ``PhysicsConfig.transit_timestep`` (0.25 ms, 4 substeps per
+control period) and returns to the 0.1 ms step before anything can reach the plate or the tray
+(the collision gate decides both, sim/collision_gate.py), so every contact between a journal
+and a bore, every grasp and every release happens at the exact step. The Stewart platform
+moves only at the fine step: its stiff leg servos (40 Hz) settle 0.45 um elsewhere at 0.25 ms,
+so the transit step needs the platform asleep with no wake pending, checked every period.
+
+What depends on the step is kept physically the same:
+- the pads' normal time constant is 0.5 ms either way (5 fine steps = 2 transit steps, the
+  stiffest MuJoCo allows at 0.25 ms): the transit step may not be longer than half of it;
+- the pads' friction rows: a part held on the arm's chain drifts in the pads at
+  Jdot*qvel * (1/b - h/2) (sim/physics.py, ``grip_friction_damping``); at the transit step b
+  is chosen to give the same drift as the fine step's b (b*h = 1.76 at 0.25 ms, under the
+  stability limit 2).
+A model whose actuators or sensors keep a history (a delay in steps: a diagnosed plant) stays
+at the fine step.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from serpar.sim.arm import PAD_GEOMS
+from serpar.sim.names import ARM, STEWART
+from serpar.sim.physics import PhysicsConfig
+
+_AWAKE = int(mujoco.mjtSleepState.mjS_AWAKE)
+
+
+class TransitStep:
+    """Switches a compiled cell between the fine step and the transit step."""
+
+    def __init__(self, model: mujoco.MjModel, physics: PhysicsConfig) -> None:
+        self.physics = physics
+        self.transit = False
+        self.bind(model)
+
+    def bind(self, model: mujoco.MjModel) -> None:
+        """A freshly compiled model: at the fine step, as compiled."""
+        self.model = model
+        pads = [model.geom(ARM + p).id for p in PAD_GEOMS]
+        self._pairs = np.flatnonzero(np.isin(model.pair_geom1, pads) | np.isin(model.pair_geom2, pads))
+        self._fine_friction = model.pair_solreffriction[self._pairs].copy()
+        delayed = bool(np.any(model.actuator_history[:, 0])) or bool(np.any(model.sensor_history[:, 0]))
+        self.available = self.physics.transit_timestep is not None and not delayed
+        self.transit = False
+        bodies = [b for b in range(model.nbody) if model.body(b).name.startswith(STEWART)]
+        self._platform_bodies = np.array(bodies, int)
+        self._platform_dofs = np.flatnonzero(np.isin(model.dof_bodyid, bodies))
+
+    def platform_still(self, data: mujoco.MjData) -> bool:
+        """The Stewart platform asleep with no wake pending (a new leg command wakes it with a
+        1e-30 m/s nudge, sim/physics.py): its servo and legs move only at the fine step."""
+        return not (np.any(data.body_awake[self._platform_bodies] == _AWAKE)
+                    or np.any(data.qvel[self._platform_dofs]))
+
+    def substeps(self, period: float) -> int:
+        return round(period / self.model.opt.timestep)
+
+    def set(self, transit: bool) -> bool:
+        """Step at the transit step (True) or the fine one; returns whether it changed."""
+        transit = transit and self.available
+        if transit == self.transit:
+            return False
+        m, p = self.model, self.physics
+        if transit:
+            assert p.transit_timestep is not None
+            m.opt.timestep = p.transit_timestep
+            m.pair_solreffriction[self._pairs] = p.transit_grip_solreffriction
+        else:
+            m.opt.timestep = p.timestep
+            m.pair_solreffriction[self._pairs] = self._fine_friction
+        self.transit = transit
+        return True
