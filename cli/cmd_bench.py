@@ -18,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--repeats", type=int, default=3, help="timings per figure, best kept (default 3)")
     p.add_argument("--episode", action="store_true",
                    help="also time the assembly task: one hole cycle, the 36-hole episode (estimated "
-                        "from it) and 2 workers vs 1 (adds ~4 min)")
+                        "from it) and 2 workers vs 1 (adds ~1 min); each figure is printed beside "
+                        "its goal")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_bench)
     return p
