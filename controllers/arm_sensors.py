@@ -113,7 +113,6 @@ class TorqueADC:
     def __init__(self, index: ArmIndex, substeps: int) -> None:
         if substeps < 4:
             raise ConfigError(f"TorqueADC needs >= 4 physics substeps per control period, got {substeps}")
-        # (with 4 the two inner corrections fall on one sample: weights (0, 2, 0, 2) / 4)
         adr = np.asarray(index.torque_adr)
         stride = int(adr[1] - adr[0]) if len(adr) > 1 else 1
         # a strided view when the sensors are evenly spaced: read without a copy per substep
@@ -124,7 +123,7 @@ class TorqueADC:
         w[1] += 1.0  # half the start value, extrapolated back: 2 x[1] - x[2], halved
         w[2] -= 0.5
         w[-1] += 1.0  # half the end value, extrapolated forward: 2 x[n-1] - x[n-2], halved
-        w[-2] -= 0.5
+        w[-2] -= 0.5  # with 4 substeps both inner corrections fall on one sample: (0, 2, 0, 2) / 4
         self.weights = w / substeps
         self._sum = np.zeros(len(adr))
         self._n = 0

@@ -136,7 +136,11 @@ class CellRuntime:
             self.gate.bind(scene.model, scene.data)
         if self.transit is not None:
             self.transit.bind(scene.model)
-            self.arm.substeps = self.transit.substeps(self.arm.dt)
+            self._match_step()
+
+    def _match_step(self) -> None:
+        """Substeps per control period for the model's timestep now (the ADC follows in step)."""
+        self.arm.substeps = self.arm.config.substeps(self.scene.model.opt.timestep)
 
     @property
     def dt(self) -> float:
@@ -156,11 +160,11 @@ class CellRuntime:
                 self._gate_tick = GATE_EVERY
                 self.gate.update(d)
             transit = self.transit
-            if transit is not None and transit.available and transit.set(
-                    not self.gate.any_on() and transit.platform_still(d)):
-                self.arm.substeps = transit.substeps(self.arm.dt)
-        self._adc = self._adcs.get(self.arm.substeps) or self._adcs.setdefault(
-            self.arm.substeps, TorqueADC(self.arm.index, self.arm.substeps))
+            if transit is not None and transit.set(not self.gate.any_on() and transit.platform_still(d)):
+                self._match_step()
+        if self._adc is None or len(self._adc.weights) != self.arm.substeps:
+            self._adc = self._adcs.get(self.arm.substeps) or self._adcs.setdefault(
+                self.arm.substeps, TorqueADC(self.arm.index, self.arm.substeps))
         motors = self.arm.index.actuators
         held = d.ctrl[motors]  # a copy: the command of the period that ends now
         self.arm.update(m, d)
@@ -203,7 +207,7 @@ class CellRuntime:
         if self.gate is not None:
             self.gate.reset()
         if self.transit is not None and self.transit.set(False):
-            self.arm.substeps = self.transit.substeps(self.arm.dt)
+            self._match_step()
 
     def _check_health(self) -> None:
         d = self.scene.data

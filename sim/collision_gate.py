@@ -4,15 +4,16 @@ MuJoCo's broad phase builds a bounding box for every geom of every body that can
 every step: with the plate's 627 bore and bar geoms and the tray's 157 pocket geoms that is
 ~11 of the ~35 us a free-motion step of the cell costs, whether or not anything is near them
 (switching the geoms' contype off does not help: the broad phase keys on the *body's*
-contype/conaffinity, compiled as the OR of its geoms'). So once per control period the gate
-looks at every other collidable body and, for each gated group (a body and what is welded to
-it in its subtree: the plate with its seated parts, the tray), zeroes the group's body-level
-contype/conaffinity while no body can reach the group within the next period, and restores the
-compiled values as soon as one can.
+contype/conaffinity, compiled as the OR of its geoms'). So at each :meth:`CollisionGate.update`
+(the runtime calls it every few control periods) the gate looks at every other collidable geom
+and, for each gated group (a body and what is welded to it in its subtree: the plate with its
+seated parts, the tray), zeroes the group's body-level contype/conaffinity while no geom can
+reach the group before the next update, and restores the compiled values as soon as one can.
 
-It changes no contact: a group is off only while every other body's bounding sphere lies
-farther from the group's bounding box than `reach` plus three times what anything moved in the
-last period, so no contact (margins included) could have formed. The broad phase sorts its
+It changes no contact: a group is off only while every other geom's bounding sphere (MuJoCo's
+own: geom_xpos, geom_rbound) lies farther from the group's bounding box than `reach` plus three
+times what anything moved since the last update, so no contact (margins included) could have
+formed. The broad phase sorts its
 pairs by body id, so the contact list, and with it the whole trajectory, is bit-identical to
 the ungated cell (tests/test_collision_gate.py).
 
@@ -29,11 +30,12 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from serpar.sim.physics import AWAKE
+
 REACH = 0.01
 """Gap [m] below which a body counts as able to reach a gated group in the coming period (on
 top of three times the largest displacement in the last one)."""
 
-_AWAKE = int(mujoco.mjtSleepState.mjS_AWAKE)
 _BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
@@ -134,7 +136,7 @@ class CollisionGate:
                                   for g in self.groups]
             return
         moved = float(np.sqrt(np.max(np.sum((pos - last) ** 2, axis=1))))
-        awake = data.body_awake[self._other_bodies] == _AWAKE
+        awake = data.body_awake[self._other_bodies] == AWAKE
         for i, g in enumerate(self.groups):
             rot = data.xmat[g.root].reshape(3, 3)
             corners = self._box_corners(g, data.xpos[g.root], rot)
@@ -142,10 +144,8 @@ class CollisionGate:
             group_moved = float(np.max(np.abs(corners - last_corners))) * 1.7321  # |d| <= sqrt(3) max|d_i|
             margin = self.reach + 3.0 * (moved + group_moved)
             candidates = self._touch[i] & awake if g.static else self._touch[i]
-            local = (pos[candidates] - data.xpos[g.root]) @ rot
-            outside = np.maximum(0.0, np.maximum(g.lo - local, local - g.hi))
             reach = margin + self._radius[candidates]
-            near = bool(np.any(np.sum(outside * outside, axis=1) < reach * reach))
+            near = bool(np.any(_gap_sq(g, pos[candidates], data.xpos[g.root], rot) < reach * reach))
             if not (near or g.static):
                 near = self._near_fixed(g, data, rot, corners, margin)
             if near != g.on:
@@ -154,9 +154,8 @@ class CollisionGate:
     def _near_fixed(self, g: _Group, data: mujoco.MjData, rot: np.ndarray, corners: np.ndarray,
                     margin: float) -> bool:
         """A moving group near the world body's geoms (the floor plane, pedestals, posts)."""
-        local = (self._fixed_centres - data.xpos[g.root]) @ rot
-        gap = np.linalg.norm(np.maximum(0.0, np.maximum(g.lo - local, local - g.hi)), axis=1) - self._fixed_radius
-        if np.any(gap < margin):
+        reach = margin + self._fixed_radius
+        if np.any(_gap_sq(g, self._fixed_centres, data.xpos[g.root], rot) < reach * reach):
             return True
         for plane in self._planes:
             normal = data.geom_xmat[plane].reshape(3, 3)[:, 2]
@@ -191,6 +190,13 @@ class CollisionGate:
     def _box_corners(g: _Group, origin: np.ndarray, rot: np.ndarray) -> np.ndarray:
         centre, half = (g.lo + g.hi) / 2, (g.hi - g.lo) / 2
         return (centre + _BOX_CORNERS * half) @ rot.T + origin
+
+
+def _gap_sq(g: _Group, points: np.ndarray, origin: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    """Squared distance of each world point from the group's box (0 inside)."""
+    local = (points - origin) @ rot
+    outside = np.maximum(0.0, np.maximum(g.lo - local, local - g.hi))
+    return np.sum(outside * outside, axis=1)
 
 
 def _in_subtree(model: mujoco.MjModel, body: int, root: int) -> bool:

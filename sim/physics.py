@@ -144,6 +144,9 @@ class PhysicsConfig:
         geom.priority = 1
 
 
+AWAKE = int(mujoco.mjtSleepState.mjS_AWAKE)
+"""data.body_awake of a body whose tree is being integrated (asleep: mjS_ASLEEP, static: mjS_STATIC)."""
+
 WAKE_NUDGE = 1e-30
 """[m/s]: MuJoCo wakes a sleeping tree whose velocity is not exactly zero (mj_wake); this
 velocity moves nothing in any run's lifetime."""

@@ -28,9 +28,7 @@ import numpy as np
 
 from serpar.sim.arm import PAD_GEOMS
 from serpar.sim.names import ARM, STEWART
-from serpar.sim.physics import PhysicsConfig
-
-_AWAKE = int(mujoco.mjtSleepState.mjS_AWAKE)
+from serpar.sim.physics import AWAKE, PhysicsConfig
 
 
 class TransitStep:
@@ -57,11 +55,8 @@ class TransitStep:
     def platform_still(self, data: mujoco.MjData) -> bool:
         """The Stewart platform asleep with no wake pending (a new leg command wakes it with a
         1e-30 m/s nudge, sim/physics.py): its servo and legs move only at the fine step."""
-        return not (np.any(data.body_awake[self._platform_bodies] == _AWAKE)
+        return not (np.any(data.body_awake[self._platform_bodies] == AWAKE)
                     or np.any(data.qvel[self._platform_dofs]))
-
-    def substeps(self, period: float) -> int:
-        return round(period / self.model.opt.timestep)
 
     def set(self, transit: bool) -> bool:
         """Step at the transit step (True) or the fine one; returns whether it changed."""
