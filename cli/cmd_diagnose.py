@@ -7,7 +7,8 @@ import argparse
 from pathlib import Path
 
 from serpar.cli import arg_types
-from serpar.cli.out_paths import add_force, out_files
+from serpar.cli.cmd_export_mjcf import export_summary, print_export
+from serpar.cli.out_paths import add_force, out_file, out_files
 from serpar.cli.output import print_json, progress, table
 from serpar.cli.robot_option import add_robot_option
 from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis, load_notes
@@ -16,7 +17,8 @@ from serpar.diagnosis.prior import PriorFamily
 from serpar.diagnosis.report_html import write_report
 from serpar.diagnosis.select import diagnose
 from serpar.errors import ConfigError
-from serpar.sim.model_file import parse_model, read_model_file
+from serpar.sim.mjcf_export import export_arm_mjcf, read_any_model
+from serpar.sim.model_file import parse_model
 from serpar.sim.plants.from_model_file import KNOWN_EFFECTS, applied_parts, arm_plant_changes
 from serpar.sim.robot_file import load_robot
 
@@ -30,9 +32,13 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="write an HTML report (plots embedded) and OUT.model.json beside it "
                         "(Stewart geometry or encoder offsets: also OUT.stewart_params.json, "
                         "for serpar run's stewart_calibration); existing files are refused unless --force")
+    p.add_argument("--mjcf", metavar="OUT.xml",
+                   help="also write the updated arm as one MJCF (established effects, full "
+                        "precision; serpar export-mjcf writes it from a model file)")
     add_force(p)
-    p.add_argument("--model", metavar="M.model.json|CELL.yaml",
-                   help="diagnose against a previous diagnosis's model file, or against the "
+    p.add_argument("--model", metavar="M.model.json|M.xml|CELL.yaml",
+                   help="diagnose against a previous diagnosis's model file (or its MJCF "
+                        "export), or against the "
                         "cell an episode config (serpar run --config YAML) builds: its arm "
                         "friction and plant model; their effects are fixed in the nominal "
                         "prediction (default: the nominal arm); the written model is M's "
@@ -88,14 +94,18 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         report = Path(args.report)
         out_files([report, *(report.with_name(report.stem + s) for s in (".model.json", ".stewart_params.json"))],
                   "--report", args.force)
+    mjcf = out_file(args.mjcf, "--mjcf", args.force, suffix=".xml") if args.mjcf else None
     robot = load_robot(getattr(args, "robot", None))
+    if mjcf is not None and robot.source != "built-in":
+        raise ConfigError(f"--mjcf writes serpar's Panda arm; this is a diagnosis of "
+                          f"{robot.label} ({robot.source})")
     rec = load_for_diagnosis(args.recording, robot)
     family = family_from_recording(rec, robot)
     notes = load_notes(rec) + list(getattr(family, "notes", ()))  # the data's, then the family's
     prior = None
     if args.model:
 
-        read = model_from_episode_config if is_config_path(args.model) else read_model_file
+        read = model_from_episode_config if is_config_path(args.model) else read_any_model
         family = prior = PriorFamily(family, read(args.model))
     bar = progress(total=0, desc="diagnose", enabled=sys.stderr.isatty() and not args.json)
 
@@ -111,10 +121,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if robot.source != "built-in":  # serpar run's cell holds the Panda, not this arm
         why = f"a model of {robot.label}: serpar run's cell has the Panda"
         plant = {"applied": [], "not_applied": [why]}
-    paths = None
+    paths, exported = None, None
     if args.report:
 
         paths = write_report(diag, Path(args.report), str(args.recording), family)
+    if mjcf is not None:
+        exported = export_arm_mjcf(parse_model(diag.model_file(str(args.recording)), "the model"),
+                                   mjcf)
     if args.json:
         out = diag.as_dict()
         if paths:
@@ -123,6 +136,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         if prior is not None:
             out["prior_model"], out["fixed_effects"] = args.model, list(prior.fixed)
         out["plant"] = plant
+        out["mjcf"] = None if exported is None else export_summary(exported)
         out["notes"] = notes
         if getattr(args, "robot", None):
             out["robot"] = {"name": robot.name, "source": robot.source}
@@ -141,4 +155,6 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             print("as a plant model (`serpar run`, plant_model:): applies "
                   f"{', '.join(plant['applied']) or 'nothing'}"
                   + "".join(f"\n  warning: {n}" for n in plant["not_applied"]))
+        if exported is not None:
+            print_export(exported)
     return 0

@@ -17,9 +17,9 @@ from serpar.cli.out_paths import add_force, existing_folders, out_folder
 from serpar.cli.output import json_line, progress, stage, table
 from serpar.errors import ConfigError
 from serpar.sim.config_io import load_yaml_config
-from serpar.sim.plants.from_model_file import arm_plant_from_file, plant_report
+from serpar.sim.plants.from_model_file import plant_report
 from serpar.tasks.episode import signal_name
-from serpar.tasks.episode_config import EpisodeConfig
+from serpar.tasks.episode_config import EpisodeConfig, arm_plant_of
 from serpar.tasks.platform_model import prepare_models
 from serpar.tasks.ray_runner import check_reachable, require_ray
 from serpar.tasks.run_episodes import (
@@ -76,7 +76,7 @@ def episode_config(args: argparse.Namespace):
         load_stewart_parameters(cfg.calibration_file)
     if cfg.plant_model is not None:  # what the simulated arm gets, and what it cannot take
 
-        for line in plant_report(arm_plant_from_file(cfg.plant_model)):
+        for line in plant_report(arm_plant_of(cfg.plant_model)):  # type: ignore[arg-type]
             print(line, file=sys.stderr)
     if args.episodes < 1:
         raise ConfigError(f"--episodes {args.episodes}: must be >= 1")

@@ -16,6 +16,7 @@ from serpar.cli import (
     cmd_control_check,
     cmd_diagnose,
     cmd_error_analysis,
+    cmd_export_mjcf,
     cmd_import,
     cmd_replay,
     cmd_run,
@@ -189,6 +190,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmd_calibrate.register(sub)
     cmd_error_analysis.register(sub)
     cmd_diagnose.register(sub)
+    cmd_export_mjcf.register(sub)
     cmd_twin.register(sub)
     cmd_blind_bench.register(sub)
     cmd_import.register(sub)

@@ -88,7 +88,7 @@ def write_report(diag: Diagnosis, path: str | Path, source: str, family: object 
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     model_path = out.with_name(out.stem + ".model.json")
-    model_path.write_text(dumps({"source": source, **diag.model}, indent=2))
+    model_path.write_text(dumps(diag.model_file(source), indent=2))
     exported = export_model_files(family, diag.model, out.with_name(out.stem))
     where = _table(["channel", "split by", "label", "n", "RMS/sigma", "p (chi-square)", "flag"],
                    [[r.channel, r.group, r.label, r.n, f"{r.rms_whitened:.3g}",

@@ -142,6 +142,19 @@ class Diagnosis:
         """The first established finding (a suspected one is not a finding)."""
         return self.established[0].effect if self.established else None
 
+    def evidence(self) -> dict[str, str]:
+        """Why each established effect was kept, one line each (the model file's evidence)."""
+        return {f.effect: (f"explains {100 * f.explained:.1f} % of the held-out residual"
+                           + (f", needed on {100 * f.stability:.0f} % of resampled folds"
+                              if f.stability is not None else "")
+                           + f"; whole fit: held-out RMS {self.heldout_rms_before:.3g} -> "
+                           f"{self.heldout_rms_after:.3g} x noise")
+                for f in self.established}
+
+    def model_file(self, source: str) -> dict[str, object]:
+        """The model file's JSON (sim/model_file.py): the fitted model, its source, evidence."""
+        return {"source": source, **self.model, "evidence": self.evidence()}
+
     @property
     def no_missing_physics(self) -> bool:
         return self.verdict == NO_MISSING_PHYSICS

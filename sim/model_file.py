@@ -2,7 +2,9 @@
 into frozen data, one-line ConfigErrors that name the problem and the valid choices.
 
 Schema: ``{"source": str, "kind": str, "effects": [name, ...], "params": {block: {"values":
-[...], "std": [...], "names": [...]}}, "prior_model": str (optional)}``. ``effects`` are the
+[...], "std": [...], "names": [...]}}, "prior_model": str, "evidence": {effect: str},
+"empirical": [term, ...]}`` (the last three optional: the model a diagnosis was run against,
+why each effect was established, and the empirical terms describing what no effect explains). ``effects`` are the
 selected effects in the order they were added; ``params`` holds one block per effect and the
 family's baseline block (refitted on every recording, so not part of the model proper).
 """
@@ -17,7 +19,7 @@ from pathlib import Path
 from serpar.errors import ConfigError
 
 KEYS = ("source", "kind", "effects", "params")
-OPTIONAL_KEYS = ("prior_model",)
+OPTIONAL_KEYS = ("prior_model", "evidence", "empirical")
 BLOCK_KEYS = ("values", "std", "names")
 
 
@@ -51,6 +53,10 @@ class DiagnosisModel:
     blocks: tuple[tuple[str, ParamBlock], ...]
     """(block name, block) in file order: every effect's, plus the baseline's."""
     prior_model: str | None = None
+    evidence: tuple[tuple[str, str], ...] = ()
+    """(effect, why it was established) as the diagnosis stated it."""
+    empirical: tuple[object, ...] = ()
+    """The diagnosis's empirical terms, kept as written: a description of residual, not physics."""
 
     def __post_init__(self) -> None:
         names = [b for b, _ in self.blocks]
@@ -127,7 +133,14 @@ def parse_model(data: object, path: str = "model") -> DiagnosisModel:
         raise ConfigError(f"{path}: prior_model must be a string (a path)")
     blocks = tuple((str(name), _block(f"{path}: params.{name}", raw))
                    for name, raw in params.items())
-    return DiagnosisModel(path, data["source"], data["kind"], tuple(effects), blocks, prior)
+    evidence = data.get("evidence", {})
+    if not isinstance(evidence, dict) or not all(isinstance(v, str) for v in evidence.values()):
+        raise ConfigError(f"{path}: evidence must map effect names to text")
+    empirical = data.get("empirical", [])
+    if not isinstance(empirical, list):
+        raise ConfigError(f"{path}: empirical must be a list of terms")
+    return DiagnosisModel(path, data["source"], data["kind"], tuple(effects), blocks, prior,
+                          tuple((str(k), v) for k, v in evidence.items()), tuple(empirical))
 
 
 def read_model_file(path: str | Path) -> DiagnosisModel:
@@ -151,4 +164,8 @@ def model_dict(model: DiagnosisModel) -> dict[str, object]:
                    for b, k in model.blocks}}
     if model.prior_model is not None:
         out["prior_model"] = model.prior_model
+    if model.evidence:
+        out["evidence"] = dict(model.evidence)
+    if model.empirical:
+        out["empirical"] = list(model.empirical)
     return out

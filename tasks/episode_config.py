@@ -13,9 +13,10 @@ import numpy as np
 from serpar.errors import ConfigError
 from serpar.kinematics.stewart_table import table5_errors
 from serpar.sim.arm import PANDA_COULOMB_FRICTION
+from serpar.sim.mjcf_export import read_any_model
 from serpar.sim.physics import PhysicsConfig
 from serpar.sim.plants.arm_changes import ArmPlantChanges
-from serpar.sim.plants.from_model_file import arm_plant_from_file
+from serpar.sim.plants.from_model_file import arm_plant_changes
 from serpar.sim.scene import SceneConfig
 from serpar.sim.stewart import StewartConfig
 from serpar.sim.tolerances import DISTRIBUTIONS
@@ -93,8 +94,9 @@ class EpisodeConfig:
     damage_force_n: float = 20.0
     hole_time_limit_s: float = 10.0
     plant_model: str | None = None
-    """Path of a diagnosis model file (``serpar diagnose --report``'s ``<stem>.model.json``): the
-    simulated arm gets the physics that diagnosis found (sim/plants/from_model_file.py; its
+    """Path of a diagnosis model file (``serpar diagnose --report``'s ``<stem>.model.json``, or
+    the MJCF ``serpar export-mjcf`` / ``diagnose --mjcf`` wrote of it): the simulated arm gets
+    the physics that diagnosis found (the controllers keep their nominal model) (sim/plants/from_model_file.py; its
     joint friction, if any, replaces arm_friction). None = the nominal arm."""
 
     contact_friction: float | None = None
@@ -125,7 +127,7 @@ class EpisodeConfig:
         if self.calibration_file is not None and not self.stewart_correction:
             raise ConfigError("stewart_calibration is a file but stewart_correction is off: it would be unused")
         if self.plant_model is not None:
-            _arm_plant(self.plant_model)  # a missing or bad file fails here, not in an episode
+            arm_plant_of(self.plant_model)  # a missing or bad file fails here, not in an episode
         if self.contact_friction is not None and not 0.01 <= self.contact_friction <= 1.5:
             raise ConfigError(f"contact_friction {self.contact_friction}: valid 0.01..1.5 or null")
 
@@ -135,20 +137,20 @@ class EpisodeConfig:
         return None if self.stewart_calibration in CALIBRATIONS else self.stewart_calibration
 
 
-def _arm_plant(path: str | None) -> ArmPlantChanges | None:
+def arm_plant_of(path: str | None) -> ArmPlantChanges | None:
     if path is None:
         return None
     if not isinstance(path, str) or not path:
-        raise ConfigError(f"plant_model {path!r}: the path of a diagnosis model file, or null")
-
-    return arm_plant_from_file(path)
+        raise ConfigError(f"plant_model {path!r}: the path of a diagnosis model file "
+                          "(.model.json or the MJCF serpar export-mjcf wrote), or null")
+    return arm_plant_changes(read_any_model(path))
 
 
 def scene_config(cfg: EpisodeConfig) -> SceneConfig:
     """The cell of an episode: its seed's tolerance draw, the hidden Stewart errors, the
     arm's joint friction and the diagnosed arm plant."""
     friction = tuple(cfg.arm_friction * f for f in PANDA_COULOMB_FRICTION) if cfg.arm_friction else ()
-    plant = _arm_plant(cfg.plant_model)
+    plant = arm_plant_of(cfg.plant_model)
     if plant is not None and plant.frictionloss:
         friction = ()  # a diagnosis fits the total dry friction against a frictionless arm
     physics = (PhysicsConfig() if cfg.contact_friction is None

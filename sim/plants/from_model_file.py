@@ -206,6 +206,9 @@ def arm_plant_changes(model: DiagnosisModel) -> ArmPlantChanges:
                 APPLY[effect](model.block(effect), d)
             else:
                 d.notes.append(f"{effect}: not applicable to the plant: {NOT_APPLICABLE[effect]}")
+        if model.empirical:
+            d.notes.append(f"empirical: {len(model.empirical)} term(s) describing residual no "
+                           "effect explains; a description, not physics the plant can take")
         for base in model.baseline_blocks:
             d.notes.append(f"{base}: the recording's own baseline (refitted on every "
                            "recording), not plant physics")

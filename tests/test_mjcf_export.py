@@ -1,0 +1,147 @@
+"""A diagnosis model as the arm's MJCF (sim/mjcf_export.py, `serpar export-mjcf`, `serpar
+diagnose --mjcf`): exact round trip, plain MuJoCo loads it anywhere, serpar run and diagnose
+take it back, and a file edited after export is refused."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from serpar.cli.entry import main
+from serpar.errors import ConfigError
+from serpar.sim.arm import JOINT_NAMES
+from serpar.sim.mjcf_export import arm_spec, export_arm_mjcf, read_mjcf_model, round_trip
+from serpar.sim.model_file import parse_model, read_model_file
+from serpar.sim.plants.arm_changes import MDH_PARAMS, PAYLOAD_BODY
+from serpar.sim.plants.from_model_file import arm_plant_changes
+from serpar.tasks.episode_config import EpisodeConfig, scene_config
+
+DATA = Path(__file__).resolve().parent / "data"
+PANDA_1 = DATA / "panda1.model.json"
+
+
+def _block(names: list[str], values: np.ndarray) -> dict[str, list]:
+    return {"names": names, "values": [float(v) for v in values], "std": [1e-4] * len(names)}
+
+
+def _every_effect(seed: int = 1) -> dict:
+    """A model with every effect the arm's MJCF can carry, values of no round decimal form."""
+    rng = np.random.default_rng(seed)
+    j = range(1, 8)
+    geo = [f"j{i}.{p}" for i in j for p in MDH_PARAMS]
+    return {"source": "test", "kind": "arm_dynamics",
+            "effects": ["joint_friction", "payload", "link_inertia", "encoder_offset",
+                        "geometric", "latency"],
+            "params": {
+                "joint_friction": _block([f"Fc{i}" for i in j] + [f"Fv{i}" for i in j],
+                                         rng.uniform(0.1, 0.6, 14)),
+                "payload": _block(["mass", "com_x", "com_y", "com_z", "Ixx", "Iyy", "Izz",
+                                   "Ixy", "Ixz", "Iyz"],
+                                  [0.3141592653589793, 0.0012345678901, -0.002, 0.04321987654,
+                                   3e-4 + 1e-9 / 3, 3e-4, 2e-4, 0.0, 0.0, 0.0]),
+                "link_inertia": _block([f"link{i}" for i in j], rng.normal(0, 0.05, 7)),
+                "encoder_offset": _block([f"offset{i}" for i in j], rng.normal(0, 1e-3, 7)),
+                "geometric": _block(geo, rng.normal(0, 1e-3, len(geo))),
+                "latency": _block(["delay"], [0.0012345678901])}}
+
+
+def test_every_effect_round_trips_exactly_and_loads_from_any_directory(tmp_path) -> None:
+    model = parse_model(_every_effect(), "every")
+    out = export_arm_mjcf(model, tmp_path / "deep" / "arm.xml")
+    assert out.round_trip_max == 0.0 and out.round_trip_field == ""
+    assert set(out.applied) == set(model.effects) and out.not_expressed == ()
+    here = os.getcwd()
+    try:
+        os.chdir("/")  # plain MuJoCo, another working directory: the file stands alone
+        m = mujoco.MjModel.from_xml_path(str(out.path))
+    finally:
+        os.chdir(here)
+    fc = model.block("joint_friction").values[:7]
+    np.testing.assert_array_equal(m.dof_frictionloss[:7], fc)  # bit for bit, not 6 digits
+    assert m.body(PAYLOAD_BODY).mass[0] == 0.3141592653589793
+    assert m.actuator_delay[0] == 0.0012345678901 and m.opt.timestep == 1e-4
+    text = out.path.read_text()
+    assert text.count("serpar diagnose: joint_friction: Fc") == len(JOINT_NAMES)
+    assert "latency: delay = 0.00123457 +- 0.0001" in text
+    assert read_mjcf_model(out.path).effects == model.effects
+
+
+def test_to_xml_alone_would_not_round_trip(tmp_path) -> None:
+    """Why the exporter writes into the source file: MjSpec.to_xml's 6 digits move the arm."""
+    changes = arm_plant_changes(parse_model(_every_effect(), "every"))
+    spec = arm_spec(changes)
+    path = tmp_path / "to_xml.xml"
+    path.write_text(spec.to_xml())
+    worst, _ = round_trip(spec, path)
+    assert worst > 1e-9
+
+
+def test_what_mujoco_cannot_express_is_listed_not_dropped(tmp_path) -> None:
+    out = export_arm_mjcf(read_model_file(PANDA_1), tmp_path / "p1.xml")
+    head = out.path.read_text().split("-->")[0]
+    assert any(n.startswith("joint_compliance") for n in out.not_expressed)
+    assert any(n.startswith("backlash") for n in out.not_expressed)
+    assert "- joint_compliance:" in head and "- backlash:" in head
+    assert out.applied == ("geometric",) and out.round_trip_max == 0.0
+
+
+def test_an_edited_file_is_refused(tmp_path) -> None:
+    out = export_arm_mjcf(parse_model(_every_effect(), "every"), tmp_path / "arm.xml")
+    text = out.path.read_text()
+    first = text.index('frictionloss="') + len('frictionloss="')
+    edited = text[:first] + "9" + text[first:]
+    out.path.write_text(edited)
+    with pytest.raises(ConfigError, match="dof_frictionloss.*edited after export"):
+        read_mjcf_model(out.path)
+    plain = tmp_path / "plain.xml"
+    plain.write_text("<mujoco><worldbody/></mujoco>")
+    with pytest.raises(ConfigError, match="serpar reads back only the MJCF it exported"):
+        read_mjcf_model(plain)
+
+
+def test_episode_plant_model_takes_the_mjcf_as_the_json(tmp_path) -> None:
+    raw = _every_effect()
+    json_path = tmp_path / "m.model.json"
+    json_path.write_text(json.dumps(raw))
+    xml = export_arm_mjcf(read_model_file(json_path), tmp_path / "m.xml").path
+    a = scene_config(EpisodeConfig(holes=1, plant_model=str(json_path))).arm_plant
+    b = scene_config(EpisodeConfig(holes=1, plant_model=str(xml))).arm_plant
+    assert a is not None and b is not None
+    assert a.frictionloss == b.frictionloss and a.mdh_errors == b.mdh_errors
+    assert a.payload == b.payload and a.actuation_delay == b.actuation_delay
+
+
+def test_a_stewart_model_is_a_clear_error(tmp_path, capsys) -> None:
+    path = tmp_path / "s.model.json"
+    path.write_text(json.dumps({"source": "x", "kind": "stewart", "effects": ["leg_thermal_drift"],
+                                "params": {"leg_thermal_drift": {"names": ["kappa"], "values": [1.0],
+                                                            "std": [0.1]}}}))
+    assert main(["export-mjcf", str(path), "--out", str(tmp_path / "s.xml")]) == 2
+    err = capsys.readouterr().err
+    assert "leg_thermal_drift" in err and "not the arm's" in err and err.count("\n") == 1
+
+
+@pytest.mark.slow
+def test_diagnose_writes_the_mjcf_and_rediagnosis_against_it_finds_nothing(tmp_path, capsys) -> None:
+    rec = tmp_path / "twin"
+    assert main(["twin", "--effect", "joint_friction", "--seed", "1", "--out", str(rec)]) == 0
+    capsys.readouterr()
+    xml = tmp_path / "arm.xml"
+    assert main(["diagnose", str(rec), "--mjcf", str(xml), "--json"]) == 0
+    first = json.loads(capsys.readouterr().out)
+    assert first["established"] == ["joint_friction"]
+    assert first["mjcf"]["applied"] == ["joint_friction"] and first["mjcf"]["round_trip_max_abs"] == 0
+    truth = json.loads((rec / "answer.json").read_text())
+    assert "joint_friction" in json.dumps(truth)
+    fitted = read_mjcf_model(xml).block("joint_friction")
+    assert "whole fit: held-out RMS" in xml.read_text()  # the evidence rides in the comments
+    assert main(["diagnose", str(rec), "--model", str(xml), "--json"]) == 0
+    second = json.loads(capsys.readouterr().out)
+    assert second["verdict"] == "no missing physics found beyond noise"
+    assert second["fixed_effects"] == ["joint_friction"]
+    assert second["model"]["params"]["joint_friction"]["values"] == list(fitted.values)
