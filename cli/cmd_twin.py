@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from serpar.cli import arg_types
 from serpar.cli.out_paths import RECORDING_FILES, add_force, out_folder
 from serpar.cli.output import print_json
 from serpar.errors import ConfigError
 from serpar.sim.recording import write_recording
 from serpar.sim.strict_json import dumps
+from serpar.twins.cell_twin import ANSWER_FILE, PLANT_FILE, draw_effects, make_cell_twin
+from serpar.twins.cell_twin import EFFECTS as CELL_EFFECTS
 from serpar.twins.registry import effects, make_twin
 
 
@@ -18,9 +22,14 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("twin", help="make a recording of a plant with a concealed effect "
                                     "(truth in answer.json)")
     p.add_argument("--effect", required=True,
-                   help="an effect name (serpar twin --effect list shows them) or none")
-    p.add_argument("--domain", help="arm_static, arm_dynamics, stewart or stewart_motion "
-                                    "(needed only with none; default arm_static)")
+                   help="an effect name (serpar twin --effect list shows them) or none; with "
+                        "--domain cell also mix (two to four drawn effects)")
+    p.add_argument("--domain", help="arm_static, arm_dynamics, stewart, stewart_motion, or cell: "
+                                    "an assembly episode of a cell with concealed physics, "
+                                    "recorded as serpar run --record does (needed only with "
+                                    "none or mix; default arm_static)")
+    p.add_argument("--holes", type=int, default=12,
+                   help="--domain cell: holes of the recorded episode (default 12)")
     p.add_argument("--magnitude", type=float,
                    help="size of the effect (units per domain twin module, e.g. "
                         "twins/stewart_twin.py: K, m/N, m, 1 or x Table 5; default: its default "
@@ -40,11 +49,14 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def cmd_twin(args: argparse.Namespace) -> int:
     if args.effect == "list":
         table = effects()
-        print("none (any domain), " + ", ".join(f"{e} ({d})" for e, d in table.items()))
+        print("none (any domain), " + ", ".join(f"{e} ({d})" for e, d in table.items())
+              + "; --domain cell: mix, " + ", ".join(CELL_EFFECTS))
         return 0
     if not args.out:
         raise ConfigError("--out DIR is required (the recording goes there, the truth to "
                           "DIR/answer.json)")
+    if args.domain == "cell" or (args.domain is None and args.effect == "mix"):
+        return _cell_twin(args)
     folder = out_folder(args.out, "--out", args.force, RECORDING_FILES + ("answer.json",))
     effect = None if args.effect == "none" else args.effect
     rec, answer = make_twin(effect, args.magnitude, args.seed, args.domain, args.sigma_error)
@@ -57,4 +69,35 @@ def cmd_twin(args: argparse.Namespace) -> int:
     else:
         print(f"wrote {out} ({answer.get('domain')}, effect {answer.get('effect')}); "
               f"the truth is in {out / 'answer.json'}")
+    return 0
+
+
+def _cell_twin(args: argparse.Namespace) -> int:
+    """``--domain cell``: a recorded episode of a concealed cell (twins/cell_twin.py)."""
+    import sys
+
+    folder = out_folder(args.out, "--out", args.force,
+                        (f"episode_{args.seed}", ANSWER_FILE, PLANT_FILE))
+    if args.magnitude is not None or args.sigma_error != 1.0:
+        raise ConfigError("--magnitude and --sigma-error do not apply to --domain cell (its "
+                          "effects are drawn from twins/cell_twin.py's ranges)")
+    draw_effects(args.effect, np.random.default_rng(0))  # a bad name fails before any work
+    folder.clear()
+    show = not args.json
+
+    def on_hole(record) -> None:  # type: ignore[no-untyped-def]
+        if show:
+            print(f"hole {record.hole}: {record.outcome} ({record.cycle_time_s:.1f} s)",
+                  file=sys.stderr)
+
+    answer = make_cell_twin(args.effect, args.seed, args.holes, folder.path, on_hole)
+    names = [str(e["effect"]) for e in answer["effects"]]  # type: ignore[index, union-attr]
+    if args.json:
+        print_json({"out": str(folder.path), "recording": answer["recording"],
+                    "answer_file": str(folder.path / ANSWER_FILE), "effect": args.effect,
+                    "domain": "cell", "holes": args.holes, "successes": answer["successes"]})
+    else:
+        print(f"wrote {answer['recording']} (cell, {args.holes} holes, {answer['successes']} "
+              f"seated; {len(names)} concealed effect(s)); the truth is in "
+              f"{folder.path / ANSWER_FILE}")
     return 0

@@ -22,6 +22,7 @@ from serpar.errors import ConfigError, UnstableSimulation
 from serpar.sim import names
 from serpar.sim.arm import FINGER_JOINT_NAMES, GRIP_ACTUATOR, GRIP_FORCE_MAX
 from serpar.sim.collision_gate import CollisionGate
+from serpar.sim.plants.drive_friction import DriveFriction
 from serpar.sim.scene import Scene
 from serpar.sim.stewart import MAX_JOINT_ERROR
 from serpar.sim.transit_step import TransitStep
@@ -102,6 +103,9 @@ class CellRuntime:
     transit: TransitStep | None = None
     """The transit step while the gate has everything out (sim/transit_step.py); None: the fine
     step throughout."""
+    drive: DriveFriction | None = None
+    """Drive friction MuJoCo has no element for (the published Panda form), set before every
+    substep; None: the arm's friction is its joints' own (``frictionloss``)."""
     _warnings: int = 0
     _adc: TorqueADC | None = None
     _adcs: dict[int, TorqueADC] = field(default_factory=dict)
@@ -127,11 +131,14 @@ class CellRuntime:
             rt.gate = CollisionGate(scene.model, scene.data, GATED_BODIES)
             if transit:
                 rt.transit = TransitStep(scene.model, scene.config.physics)
-            scene.on_recompile.append(rt._rebind)
+        scene.on_recompile.append(rt._rebind)
         return rt
 
     def _rebind(self, scene: Scene) -> None:
-        """A recompiled scene: the gate and the step size start over on the new model."""
+        """A recompiled scene: the drive, the gate and the step size start over on the new
+        model."""
+        if self.drive is not None:
+            self.drive = DriveFriction.of_arm(scene.model, names.ARM, self.drive.scale)
         if self.gate is not None:
             self.gate.bind(scene.model, scene.data)
         if self.transit is not None:
@@ -174,8 +181,10 @@ class CellRuntime:
         # command switched at t_k would act half a substep early; the substep on which it
         # switches gets the mean of the old and new command, which centres the switch on t_k.
         d.ctrl[motors] = 0.5 * (held + new)
-        probe, adc = self.substep_probe, self._adc
+        probe, adc, drive = self.substep_probe, self._adc, self.drive
         for s in range(self.arm.substeps):
+            if drive is not None:
+                drive(d)
             mujoco.mj_step(m, d)
             adc.sample(d, s)
             if probe is not None:

@@ -39,10 +39,17 @@ TORQUE_AXIS = 2
 
 TORQUE_LIMITS: tuple[float, ...] = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
 """Symmetric joint torque limits [N m] (Franka datasheet)."""
-PANDA_COULOMB_FRICTION: tuple[float, ...] = tuple(phi / 2 for phi in (
-    0.54615, 0.87224, 0.64068, 1.2794, 0.83904, 0.30301, 0.56489))
-"""Dry joint friction of a real Panda [N m]: half the swing phi_1 of the sigmoid friction model
-identified by Gaz et al. (IEEE RA-L 2019, "Dynamic identification of the Franka Emika Panda"),
+GAZ_FRICTION_PHI: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]] = (
+    (0.54615, 0.87224, 0.64068, 1.2794, 0.83904, 0.30301, 0.56489),
+    (5.1181, 9.0657, 10.136, 5.5903, 8.3469, 17.133, 10.336),
+    (0.039533, 0.025882, -0.04607, 0.036194, 0.026226, -0.021047, 0.0035526))
+"""The joint friction of a real Panda as Gaz et al. identified it (IEEE RA-L 2019, "Dynamic
+identification of the Franka Emika Panda Robot With Retrieval of Feasible Parameters Using
+Penalty-Based Optimization"; their published model code): per joint phi_1 [N m], phi_2
+[s/rad], phi_3 [rad/s] of tau_f = phi_1 / (1 + exp(-phi_2 (dq + phi_3))) - phi_1 / (1 +
+exp(-phi_2 phi_3)), the torque the drive loses to friction."""
+PANDA_COULOMB_FRICTION: tuple[float, ...] = tuple(phi / 2 for phi in GAZ_FRICTION_PHI[0])
+"""Dry joint friction of a real Panda [N m]: half the swing phi_1 of Gaz et al.'s sigmoid,
 i.e. its level at speed on either side of zero."""
 
 LINK_NAMES: tuple[str, ...] = tuple(f"link{i}" for i in range(8))

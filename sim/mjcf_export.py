@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 
 from serpar.errors import ConfigError
-from serpar.sim.arm import ACTUATOR_NAMES, ARM_XML, JOINT_NAMES, build_arm_spec
+from serpar.sim.arm import ACTUATOR_NAMES, ARM_XML, JOINT_NAMES, TORQUE_SENSOR_NAMES, build_arm_spec
 from serpar.sim.model_file import DiagnosisModel, model_dict, parse_model, read_model_file
 from serpar.sim.physics import PhysicsConfig
 from serpar.sim.plants.arm_changes import PAYLOAD_BODY, ArmPlantChanges, apply_arm_plant
@@ -33,6 +33,8 @@ from serpar.sim.plants.from_model_file import APPLY, KNOWN_EFFECTS, arm_plant_ch
 
 MODEL_TEXT = "serpar.model"
 """Name of the ``<custom><text>`` element holding the model file's JSON."""
+INTERP_NAMES = ("zoh", "linear", "cubic")
+"""MJCF names of a history's interpolation, by MuJoCo's number."""
 ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")
 XML_SUFFIXES = (".xml", ".mjcf")
 
@@ -103,6 +105,8 @@ def _write_changes(root: ET.Element, nominal: mujoco.MjSpec, plant: mujoco.MjSpe
              "general": "actuator", "position": "actuator", "velocity": "actuator"}
     found = {(kinds[el.tag], el.get("name")): el for el in root.iter()
              if el.tag in kinds and el.get("name")}
+    for section in root.iter("sensor"):
+        found.update({("sensor", el.get("name")): el for el in section if el.get("name")})
     for joint in plant.joints:
         el, old = found["joint", joint.name], nominal.joint(joint.name)
         for attr in ("frictionloss", "ref"):
@@ -132,6 +136,12 @@ def _write_changes(root: ET.Element, nominal: mujoco.MjSpec, plant: mujoco.MjSpe
             el.set("pos", _numbers(site.pos))
         if site.alt.type != old.alt.type or not np.array_equal(site.quat, old.quat):
             _orientation(el, site)
+    for sensor in plant.sensors:
+        old, el = nominal.sensor(sensor.name), found["sensor", sensor.name]
+        if (sensor.delay, sensor.nsample, sensor.interp) != (old.delay, old.nsample, old.interp):
+            el.set("delay", _number(sensor.delay))
+            el.set("nsample", str(int(sensor.nsample)))
+            el.set("interp", INTERP_NAMES[int(sensor.interp)])
     for act in plant.actuators:
         old, el = nominal.actuator(act.name), found["actuator", act.name]
         if act.delay != old.delay or act.nsample != old.nsample:
@@ -172,7 +182,8 @@ def _annotate(root: ET.Element, model: DiagnosisModel) -> None:
                     targets.setdefault(f"link{j}", []).append((effect, "; ".join(per_joint[j]), why))
         else:
             text = "; ".join(x for xs in per_joint.values() for x in xs)
-            for where in ((PAYLOAD_BODY,) if effect == "payload" else ACTUATOR_NAMES):
+            where_all = {"payload": (PAYLOAD_BODY,), "sensor_timing": TORQUE_SENSOR_NAMES}
+            for where in where_all.get(effect, ACTUATOR_NAMES):
                 targets.setdefault(where, []).append((effect, text, why))
     for el in list(root.iter()):
         notes = targets.get(el.get("name", ""))

@@ -25,7 +25,13 @@ from serpar.controllers.cell_runtime import CellRuntime
 from serpar.controllers.plate_commander import PlateCommander
 from serpar.errors import SerparError, UnstableSimulation
 from serpar.sim.scene import Scene, build_scene
-from serpar.tasks.episode_config import EpisodeConfig, Outcome, scene_config
+from serpar.tasks.episode_config import (
+    EpisodeConfig,
+    Outcome,
+    cell_log,
+    drive_friction,
+    scene_config,
+)
 from serpar.tasks.episode_recorder import EpisodeRecorder
 from serpar.tasks.episode_steps import CycleFailure, HoleCycle
 from serpar.tasks.platform_model import believed_errors
@@ -99,6 +105,7 @@ class EpisodeInterrupted(KeyboardInterrupt):
 def build_runtime(cfg: EpisodeConfig) -> tuple[CellRuntime, PlateCommander]:
     scene: Scene = build_scene(scene_config(cfg))
     rt = CellRuntime.create(scene, controller_config(cfg.sensor_noise), seed=cfg.seed)
+    rt.drive = drive_friction(cfg, scene.model)
     plate = PlateCommander.create(scene.model, scene.data, scene.config.stewart, believed_errors(cfg))
     rt.observers.append(lambda r: plate.update(r.scene.data, r.time))
     return rt, plate
@@ -134,9 +141,10 @@ class _Snapshot:
 def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
                 on_record: Callable[[HoleRecord], None] | None = None,
                 runtime: tuple[CellRuntime, PlateCommander] | None = None,
-                recording: str | Path | None = None) -> EpisodeSummary:
+                recording: str | Path | None = None, concealed: bool = False) -> EpisodeSummary:
     """Fill the holes of `cfg`; `on_record` receives each hole's record as it ends; `recording`
-    names a folder for the episode's recording (signals, meta.json, episode.rrd)."""
+    names a folder for the episode's recording (signals, meta.json, episode.rrd); `concealed`:
+    its meta.json holds what a real cell's log would (:func:`cell_log`), not the physics."""
     t_wall = time.perf_counter()
     rt, plate = runtime or build_runtime(cfg)
     imaging = ImagingConfig(width=cfg.camera_width) if cfg.sensor_noise else ImagingConfig.ideal(cfg.camera_width)
@@ -144,8 +152,8 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
     recorder = None
     if recording is not None:
 
-        recorder = EpisodeRecorder(rt, recording, {"episode_config": dataclasses.asdict(cfg)},
-                                   name=f"episode_{cfg.seed}")
+        about = {"cell_log": cell_log(cfg)} if concealed else {"episode_config": dataclasses.asdict(cfg)}
+        recorder = EpisodeRecorder(rt, recording, about, name=f"episode_{cfg.seed}")
         rt.observers.append(recorder)
         camera.on_frames = recorder.frames
     rebind = [lambda scene: camera.rebind(scene.model), lambda scene: rt.reset_health()]

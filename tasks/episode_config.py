@@ -8,14 +8,17 @@ import enum
 import math
 from dataclasses import dataclass, field
 
+import mujoco
 import numpy as np
 
 from serpar.errors import ConfigError
 from serpar.kinematics.stewart_table import table5_errors
+from serpar.sim import names
 from serpar.sim.arm import PANDA_COULOMB_FRICTION
 from serpar.sim.mjcf_export import read_any_model
 from serpar.sim.physics import PhysicsConfig
 from serpar.sim.plants.arm_changes import ArmPlantChanges
+from serpar.sim.plants.drive_friction import MAX_SCALE, DriveFriction
 from serpar.sim.plants.from_model_file import arm_plant_changes
 from serpar.sim.scene import SceneConfig
 from serpar.sim.stewart import StewartConfig
@@ -25,6 +28,7 @@ CONTROLLERS = ("force_position", "impedance")
 ERROR_MODES = ("table5", "random", "none")
 CALIBRATIONS = ("campaign", "none")
 CAMERA_WIDTHS = (2048, 1024)
+FRICTION_FORMS = ("coulomb", "gaz")
 N_HOLES = 36
 
 
@@ -88,6 +92,10 @@ class EpisodeConfig:
     ~0.1-0.4 mm off a commanded pose, like the seed's measured Panda (Fig. 3: up to 0.4 mm, within
     0.1 mm near the goal; Fig. 5: < 0.2 mm), where the frictionless arm is 0.02 mm off. This is
     what defeats the serial robot alone. 0 = frictionless."""
+    arm_friction_form: str = "coulomb"
+    """How arm_friction acts: 'coulomb' = the dry level at speed as MuJoCo joint ``frictionloss``
+    (a constraint: sticks at rest); 'gaz' = the whole published Panda model, a sigmoid with
+    offset (sim/plants/drive_friction.py), times arm_friction, as a drive torque each step."""
     sensor_noise: bool = True
     tolerance_distribution: str = "uniform"
     camera_width: int = 2048
@@ -115,6 +123,11 @@ class EpisodeConfig:
             raise ConfigError(f"controller {self.controller!r}; valid: {', '.join(CONTROLLERS)}")
         if not 0 <= self.arm_friction <= 3:
             raise ConfigError(f"arm_friction {self.arm_friction}: valid 0..3 (fraction of a real Panda's)")
+        if self.arm_friction_form not in FRICTION_FORMS:
+            raise ConfigError(f"arm_friction_form {self.arm_friction_form!r}; valid: {', '.join(FRICTION_FORMS)}")
+        if self.arm_friction_form == "gaz" and not 0 < self.arm_friction <= MAX_SCALE:
+            raise ConfigError(f"arm_friction {self.arm_friction} with arm_friction_form gaz: valid "
+                              f"0 < arm_friction <= {MAX_SCALE} (times a real Panda's)")
         if self.tolerance_distribution not in DISTRIBUTIONS:
             raise ConfigError(f"tolerance_distribution {self.tolerance_distribution!r}; valid: {', '.join(DISTRIBUTIONS)}")
         if self.camera_width not in CAMERA_WIDTHS:
@@ -151,13 +164,35 @@ def scene_config(cfg: EpisodeConfig) -> SceneConfig:
     arm's joint friction and the diagnosed arm plant."""
     friction = tuple(cfg.arm_friction * f for f in PANDA_COULOMB_FRICTION) if cfg.arm_friction else ()
     plant = arm_plant_of(cfg.plant_model)
-    if plant is not None and plant.frictionloss:
-        friction = ()  # a diagnosis fits the total dry friction against a frictionless arm
+    if (plant is not None and plant.frictionloss) or cfg.arm_friction_form == "gaz":
+        # a diagnosis fits the total dry friction against a frictionless arm; the Gaz form is
+        # the runtime's drive torque (drive_friction below), not a joint element
+        friction = ()
     physics = (PhysicsConfig() if cfg.contact_friction is None
                else PhysicsConfig(precision_friction=cfg.contact_friction))
     return SceneConfig(seed=cfg.seed, tolerance_distribution=cfg.tolerance_distribution,
                        stewart=StewartConfig(joint_errors=cfg.hidden_errors.draw(cfg.seed)),
                        arm_joint_friction=friction, arm_plant=plant, physics=physics)
+
+
+CELL_LOG_KEYS = ("seed", "holes", "controller", "stewart_correction", "stewart_calibration",
+                 "tolerance_distribution", "camera_width", "damage_force_n", "hole_time_limit_s")
+"""What a real cell's own log says of an episode: the task and the part population, not the
+physics (arm friction, plant model, contact friction, the platform's hidden errors, noise)."""
+
+
+def cell_log(cfg: EpisodeConfig) -> dict[str, object]:
+    """The episode config as a real cell's log would give it (:data:`CELL_LOG_KEYS`)."""
+    return {k: getattr(cfg, k) if k != "holes" or isinstance(cfg.holes, int) else list(cfg.holes)
+            for k in CELL_LOG_KEYS}
+
+
+def drive_friction(cfg: EpisodeConfig, model: mujoco.MjModel) -> DriveFriction | None:
+    """The runtime's drive friction of an episode's arm (the 'gaz' form), or None."""
+    plant = arm_plant_of(cfg.plant_model)
+    if cfg.arm_friction_form != "gaz" or (plant is not None and plant.frictionloss):
+        return None
+    return DriveFriction.of_arm(model, names.ARM, cfg.arm_friction)
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:

@@ -36,7 +36,7 @@ def _every_effect(seed: int = 1) -> dict:
     geo = [f"j{i}.{p}" for i in j for p in MDH_PARAMS]
     return {"source": "test", "kind": "arm_dynamics",
             "effects": ["joint_friction", "payload", "link_inertia", "encoder_offset",
-                        "geometric", "latency"],
+                        "geometric", "latency", "sensor_timing"],
             "params": {
                 "joint_friction": _block([f"Fc{i}" for i in j] + [f"Fv{i}" for i in j],
                                          rng.uniform(0.1, 0.6, 14)),
@@ -47,7 +47,8 @@ def _every_effect(seed: int = 1) -> dict:
                 "link_inertia": _block([f"link{i}" for i in j], rng.normal(0, 0.05, 7)),
                 "encoder_offset": _block([f"offset{i}" for i in j], rng.normal(0, 1e-3, 7)),
                 "geometric": _block(geo, rng.normal(0, 1e-3, len(geo))),
-                "latency": _block(["delay"], [0.0012345678901])}}
+                "latency": _block(["delay"], [0.0012345678901]),
+                "sensor_timing": _block(["lag"], [0.00087654321])}}
 
 
 def test_every_effect_round_trips_exactly_and_loads_from_any_directory(tmp_path) -> None:
@@ -65,6 +66,7 @@ def test_every_effect_round_trips_exactly_and_loads_from_any_directory(tmp_path)
     np.testing.assert_array_equal(m.dof_frictionloss[:7], fc)  # bit for bit, not 6 digits
     assert m.body(PAYLOAD_BODY).mass[0] == 0.3141592653589793
     assert m.actuator_delay[0] == 0.0012345678901 and m.opt.timestep == 1e-4
+    assert m.sensor_delay[m.sensor("tau_J3").id] == 0.00087654321
     text = out.path.read_text()
     assert text.count("serpar diagnose: joint_friction: Fc") == len(JOINT_NAMES)
     assert "latency: delay = 0.00123457 +- 0.0001" in text

@@ -28,6 +28,7 @@ from serpar.sim.arm import (
     MDH_ALPHA,
     MDH_D,
     N_JOINTS,
+    TORQUE_SENSOR_NAMES,
 )
 
 PAYLOAD_BODY = "plant_payload"
@@ -38,6 +39,8 @@ MAX_ANGLE_ERROR = 0.1  # [rad] beyond this an "error" is another robot, not a ca
 MAX_LENGTH_ERROR = 0.05  # [m]
 MAX_REF = 0.2  # [rad] the diagnosis' own bound on an encoder offset
 MAX_DELAY = 0.1  # [s]
+INTERP_LINEAR = 1
+"""MJCF ``interp="linear"`` of a sensor history (MuJoCo 4's Python bindings give no enum)."""
 
 
 def _floats(name: str, values: tuple[float, ...], lo: float, hi: float) -> None:
@@ -123,6 +126,8 @@ class ArmPlantChanges:
     :mod:`serpar.kinematics.mdh`. Row i moves body link<i>'s frame; beta_i tilts the next frame."""
     actuation_delay: float = 0.0
     """[s] Torque commands reach the arm's joints this late (MuJoCo actuator ``delay``)."""
+    torque_sensor_delay: float = 0.0
+    """[s] The joint torque sensors read this late (MuJoCo sensor ``delay``)."""
     source: str = ""
     """Where the changes come from (a model file), for messages."""
     not_applied: tuple[str, ...] = ()
@@ -144,8 +149,10 @@ class ArmPlantChanges:
                               for v, lim in zip(r, limits)):
                 raise ConfigError(f"mdh_errors: () or {N_JOINTS} rows of ({', '.join(MDH_PARAMS)}) "
                                   f"within {MAX_ANGLE_ERROR} rad / {MAX_LENGTH_ERROR} m")
-        if not (math.isfinite(self.actuation_delay) and 0 <= self.actuation_delay <= MAX_DELAY):
-            raise ConfigError(f"actuation_delay {self.actuation_delay} s: valid 0..{MAX_DELAY} s")
+        for name in ("actuation_delay", "torque_sensor_delay"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0 <= value <= MAX_DELAY):
+                raise ConfigError(f"{name} {value} s: valid 0..{MAX_DELAY} s")
 
 
 def _rot(axis: int, angle: float) -> NDArray[np.float64]:
@@ -240,4 +247,15 @@ def apply_arm_plant(spec: mujoco.MjSpec, changes: ArmPlantChanges, timestep: flo
             act = spec.actuator(name)
             act.delay = changes.actuation_delay
             # the history must reach back past the delay: one sample per physics step
-            act.nsample = math.ceil(changes.actuation_delay / timestep) + 2
+            act.nsample = history_samples(changes.actuation_delay, timestep)
+    if changes.torque_sensor_delay > 0:
+        for name in TORQUE_SENSOR_NAMES:
+            sensor = spec.sensor(name)
+            sensor.delay = changes.torque_sensor_delay
+            sensor.nsample = history_samples(changes.torque_sensor_delay, timestep)
+            sensor.interp = INTERP_LINEAR  # a delay between two steps
+
+
+def history_samples(delay: float, timestep: float) -> int:
+    """MuJoCo history length for a ``delay`` at the physics step (one sample per step)."""
+    return math.ceil(delay / timestep) + 2

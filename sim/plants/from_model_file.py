@@ -14,6 +14,7 @@ arm_static_effects.py, kinematics/mdh.py):
 | encoder | o<j> (link = (1 + s) q + o), s<j> | joint ``ref`` = -o; the scale s is not expressible |
 | geometric | j<i>.alpha/a/theta/d/beta | body link<i>'s pos/quat (beta: the next frame) |
 | latency | delay [s] | arm actuators' ``delay`` |
+| sensor_timing | lag [s] | the joint torque sensors' ``delay`` (linear between steps) |
 
 Not expressible, and reported (``ArmPlantChanges.not_applied``), with the reason in
 :data:`NOT_APPLICABLE`. A value the plant cannot take (negative friction or mass, a non-physical
@@ -50,8 +51,6 @@ NOT_APPLICABLE: dict[str, str] = {
                      "for an episode",
     "torque_sensor": "a torque sensor's gain is its calibration, not physics: MuJoCo's torque "
                      "sensors have no gain",
-    "sensor_timing": "when the torque sensors are sampled is the sensor model's timing, not the "
-                     "arm's physics",
     "stribeck_friction": "MuJoCo's frictionloss is one dry level (the Coulomb part, from "
                          "joint_friction): a fall with speed needs a drive torque the cell's "
                          "arm does not model",
@@ -170,19 +169,26 @@ def _geometric(block: ParamBlock, d: _Draft) -> None:
     d.fields["mdh_errors"] = tuple(tuple(r) for r in mdh)
 
 
-def _latency(block: ParamBlock, d: _Draft) -> None:
-    delay = _names("latency", block, ("delay",)).get("delay", 0.0)
-    if delay < 0:
-        d.notes.append(f"latency delay = {delay:.3g} s < 0 (a command cannot act early): "
-                       "not applied")
-    else:
-        d.fields["actuation_delay"] = delay
+def _delay(effect: str, param: str, field_name: str, why: str) -> Callable[[ParamBlock, _Draft], None]:
+    """A delay effect as a MuJoCo history ``delay``: a negative one is not physical."""
+    def apply(block: ParamBlock, d: _Draft) -> None:
+        value = _names(effect, block, (param,)).get(param, 0.0)
+        if value < 0:
+            d.notes.append(f"{effect} {param} = {value:.3g} s < 0 ({why}): not applied")
+        else:
+            d.fields[field_name] = value
+    return apply
+
+
+_latency = _delay("latency", "delay", "actuation_delay", "a command cannot act early")
+_sensor_timing = _delay("sensor_timing", "lag", "torque_sensor_delay",
+                        "a torque sensor cannot read ahead of the joint")
 
 
 APPLY: dict[str, Callable[[ParamBlock, _Draft], None]] = {
     "joint_friction": _friction, "link_friction": _link_friction, "payload": _payload, "link_inertia": _links,
     "encoder_offset": _offsets, "encoder": _encoder, "geometric": _geometric,
-    "latency": _latency,
+    "latency": _latency, "sensor_timing": _sensor_timing,
 }
 KNOWN_EFFECTS: tuple[str, ...] = tuple(APPLY) + tuple(NOT_APPLICABLE)
 
@@ -232,7 +238,8 @@ def applied_parts(changes: ArmPlantChanges) -> list[str]:
         ("link mass/inertia", bool(changes.link_mass_scale)),
         ("encoder offsets (joint ref)", bool(changes.joint_ref)),
         ("link frames (MD-H errors)", bool(changes.mdh_errors)),
-        ("actuation delay", changes.actuation_delay > 0)) if on]
+        ("actuation delay", changes.actuation_delay > 0),
+        ("torque sensor delay", changes.torque_sensor_delay > 0)) if on]
 
 
 def plant_report(changes: ArmPlantChanges) -> list[str]:

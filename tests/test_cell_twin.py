@@ -1,0 +1,111 @@
+"""The concealed cell (twins/cell_twin.py, `serpar twin --domain cell`) and the physics it
+conceals that the cell did not have before: the published Panda friction (a drive torque) and
+a torque-sensor delay (MuJoCo sensor history)."""
+
+from __future__ import annotations
+
+import json
+
+import mujoco
+import numpy as np
+import pytest
+
+from serpar.cli.entry import main
+from serpar.errors import ConfigError
+from serpar.sim import names
+from serpar.sim.arm import GAZ_FRICTION_PHI, TORQUE_SENSOR_NAMES
+from serpar.sim.plants.arm_changes import ArmPlantChanges
+from serpar.sim.plants.drive_friction import DriveFriction, gaz_friction_torque, gaz_levels
+from serpar.sim.scene import SceneConfig, build_scene
+from serpar.tasks.episode import build_runtime
+from serpar.tasks.episode_config import EpisodeConfig
+from serpar.twins.cell_twin import EFFECTS, concealed_cell, draw_effects
+
+
+def test_gaz_friction_is_the_published_model() -> None:
+    """Gaz et al.'s model code: tau_f = phi1/(1+exp(-phi2 (dq+phi3))) - phi1/(1+exp(-phi2 phi3))."""
+    phi1, phi2, phi3 = (np.asarray(p) for p in GAZ_FRICTION_PHI)
+    assert np.all(gaz_friction_torque(np.zeros(7)) == 0)  # no torque at rest
+    fast = gaz_friction_torque(np.full(7, 50.0), 2.0)
+    slow = gaz_friction_torque(np.full(7, -50.0), 2.0)
+    level, offset = gaz_levels(2.0)
+    np.testing.assert_allclose(fast, offset + level, atol=1e-9)
+    np.testing.assert_allclose(slow, offset - level, atol=1e-9)
+    np.testing.assert_allclose(level, phi1)  # 2 x phi1 / 2
+    # the offset is the sigmoid's shift: ~ -phi1 phi2 phi3 / 4 for small phi2 phi3
+    np.testing.assert_allclose(offset, -2 * phi1 * phi2 * phi3 / 4, rtol=0.05)
+    with pytest.raises(ConfigError, match="valid 0 < scale <= 5"):
+        DriveFriction(np.arange(7), 0.0)
+
+
+def test_gaz_form_is_a_drive_torque_not_a_joint_element() -> None:
+    rt, _ = build_runtime(EpisodeConfig(holes=1, arm_friction=2.0, arm_friction_form="gaz"))
+    m, d = rt.scene.model, rt.scene.data
+    dofs = [m.joint(names.ARM + f"joint{j}").dofadr[0] for j in range(1, 8)]
+    assert np.all(m.dof_frictionloss[dofs] == 0) and rt.drive is not None
+    d.qvel[dofs] = 0.4
+    rt.step()  # the drive sets qfrc_applied from the speed at each substep's start
+    np.testing.assert_allclose(d.qfrc_applied[dofs], -gaz_friction_torque(d.qvel[dofs], 2.0),
+                               rtol=0.2)
+    assert np.all(d.qfrc_applied[dofs] < 0)  # it opposes the motion
+    nominal, _ = build_runtime(EpisodeConfig(holes=1))
+    assert nominal.drive is None and np.all(nominal.scene.model.dof_frictionloss[dofs] > 0)
+    with pytest.raises(ConfigError, match="arm_friction_form 'stribeck'; valid: coulomb, gaz"):
+        EpisodeConfig(arm_friction_form="stribeck")
+
+
+def test_torque_sensor_delay_reads_the_torque_that_late() -> None:
+    """A 1.25 ms sensor delay (between two 0.1 ms steps: linear) against the same arm without."""
+    scenes = [build_scene(SceneConfig(n_conductors=0, arm_plant=ArmPlantChanges(
+        torque_sensor_delay=lag))) for lag in (0.0, 0.00125)]
+    adr = [scenes[0].model.sensor(names.ARM + n).adr[0] + 2 for n in TORQUE_SENSOR_NAMES]
+    rng = np.random.default_rng(0)
+    reads: list[list[np.ndarray]] = [[], []]
+    for k in range(120):
+        tau = rng.normal(0, 3.0, 7) if k % 10 == 0 else None
+        for i, scene in enumerate(scenes):
+            if tau is not None:
+                scene.data.ctrl[scene.arm_actuators] = tau
+            mujoco.mj_step(scene.model, scene.data)
+            reads[i].append(scene.data.sensordata[adr].copy())
+    plain, late = np.array(reads[0]), np.array(reads[1])
+    want = 0.5 * (plain[60 - 12] + plain[60 - 13])  # 12.5 steps earlier
+    np.testing.assert_allclose(late[60], want, atol=1e-9)
+    assert np.abs(late[60] - plain[60]).max() > 1e-3  # it is not the undelayed reading
+
+
+def test_mix_draws_two_to_four_and_names_are_diagnoses() -> None:
+    counts = [len(draw_effects("mix", np.random.default_rng(s))) for s in range(40)]
+    assert min(counts) == 2 and max(counts) == 4
+    assert set(EFFECTS) == {"joint_friction", "sensor_timing", "latency", "payload",
+                            "contact_friction"}
+    with pytest.raises(ConfigError, match="valid: mix, none, joint_friction"):
+        draw_effects("gremlins", np.random.default_rng(0))
+    changes, answer, model = concealed_cell("mix", 0, 3)
+    drawn = [e["effect"] for e in answer["effects"]]
+    assert model is None or set(model["effects"]) <= {"sensor_timing", "latency", "payload"}
+    assert ("joint_friction" in drawn) == (changes.get("arm_friction_form") == "gaz")
+
+
+@pytest.mark.slow
+def test_a_recorded_concealed_cell_keeps_its_truth_out_of_the_recording(tmp_path) -> None:
+    out = tmp_path / "cell"
+    assert main(["twin", "--domain", "cell", "--effect", "mix", "--seed", "0", "--holes", "1",
+                 "--out", str(out), "--json"]) == 0
+    answer = json.loads((out / "answer.json").read_text())
+    drawn = {e["effect"]: e for e in answer["effects"]}
+    assert set(drawn) == {"joint_friction", "sensor_timing", "payload", "contact_friction"}
+    rec = out / "episode_0"
+    meta_text = (rec / "meta.json").read_text()
+    meta = json.loads(meta_text)
+    assert meta["model"]["cell_log"]["seed"] == 0 and meta["model"]["cell_log"]["holes"] == 1
+    for key in ("episode_config", "arm_friction", "contact_friction", "plant_model", "gaz",
+                "answer", "hidden_errors"):
+        assert key not in meta_text, key
+    concealed = [answer["concealed_config"]["arm_friction"], drawn["contact_friction"]["mu"],
+                 drawn["payload"]["params"]["mass"], drawn["sensor_timing"]["params"]["lag"]]
+    for value in concealed:  # no concealed number in any form the log could hold
+        for text in (repr(value), f"{value:.6g}", f"{value:.4g}"):
+            assert text not in meta_text, text
+    assert sorted(p.name for p in rec.iterdir()) == ["episode.rrd", "meta.json", "signals.parquet"]
+    assert (out / "answer.model.json").is_file()  # the plant it ran: beside, not inside
