@@ -20,6 +20,7 @@ from serpar.cli import (
     cmd_import,
     cmd_replay,
     cmd_run,
+    cmd_sim2real,
     cmd_twin,
     cmd_vision_check,
     cmd_workspace,
@@ -191,6 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmd_error_analysis.register(sub)
     cmd_diagnose.register(sub)
     cmd_export_mjcf.register(sub)
+    cmd_sim2real.register(sub)
     cmd_twin.register(sub)
     cmd_blind_bench.register(sub)
     cmd_import.register(sub)

@@ -42,7 +42,12 @@ def model_from_episode_config(path: str | Path) -> DiagnosisModel:
     if not p.is_file():
         raise ConfigError(f"config {p} not found (an episode config YAML, as `serpar run "
                           "--config` takes)")
-    cfg = load_yaml_config(EpisodeConfig, str(p))
+    return model_from_config(load_yaml_config(EpisodeConfig, str(p)), str(p))
+
+
+def model_from_config(cfg: EpisodeConfig, source: str) -> DiagnosisModel:
+    """The arm physics of the cell ``cfg`` builds (``source``: where the config came from)."""
+    p = source
     effects: list[str] = []
     blocks: list[tuple[str, ParamBlock]] = []
     if cfg.plant_model is not None:

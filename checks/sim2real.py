@@ -1,0 +1,179 @@
+"""``serpar sim2real``: does the simulator predict what the assembly does on a real cell, and
+does a diagnosis of that cell's recordings make it predict better?
+
+1. Read the real cell's episode recordings (``serpar run --record`` layout: its log's seed,
+   holes and task keys; tasks/episode_config.py ``CELL_LOG_KEYS``), never the physics.
+2. Rerun the simulator on the same seeds and holes (the nominal cell, or ``--model M``) and
+   compare per hole (diagnosis/task_outcomes.py): each outcome's mean paired difference,
+   real minus simulated, with its 95 % t interval over the holes.
+3. Diagnose the real recordings against that simulator (established findings only), write
+   the updated model (``updated.model.json``, ``updated.xml``), rerun with it, compare again.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from serpar.calibration.camera_cache import calibrated_pairs
+from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis
+from serpar.diagnosis.config_model import model_from_config
+from serpar.diagnosis.prior import PriorFamily
+from serpar.diagnosis.result import Diagnosis
+from serpar.diagnosis.select import diagnose
+from serpar.diagnosis.task_outcomes import OUTCOMES, HoleOutcome, hole_outcomes
+from serpar.errors import ConfigError
+from serpar.sim.mjcf_export import MjcfExport, export_arm_mjcf
+from serpar.sim.model_file import parse_model
+from serpar.sim.physics import PhysicsConfig
+from serpar.tasks.episode import run_episode
+from serpar.tasks.episode_config import CELL_LOG_KEYS, EpisodeConfig
+from serpar.tasks.run_episodes import recording_folder
+
+Tick = Callable[[str], None]
+NOMINAL_MU = PhysicsConfig().precision_friction
+MU_RANGE = (0.01, 1.5)
+
+
+@dataclass(frozen=True)
+class RealEpisode:
+    folder: Path
+    config: EpisodeConfig
+    """The rerun: the log's seed, holes and task keys, on the nominal physics."""
+    notes: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class OutcomeDiff:
+    diff: float | None
+    """Mean of real minus simulated over the holes where both have a value."""
+    ci: float | None
+    """Half-width of its 95 % t interval (None with fewer than 2 holes)."""
+    n: int
+    pairs: tuple[float, ...]
+
+    def as_dict(self) -> dict[str, object]:
+        return {"diff": self.diff, "ci": self.ci, "n": self.n}
+
+
+def real_episodes(real_dir: str | Path, seed: int = 0) -> list[RealEpisode]:
+    """The episode recordings in ``real_dir`` (``episode_*`` folders, or the folder itself)."""
+    root = Path(real_dir)
+    if not root.is_dir():
+        raise ConfigError(f"{root} is not a folder of serpar run --record episodes")
+    folders = sorted(p for p in root.iterdir() if p.is_dir() and (p / "meta.json").is_file())
+    if (root / "meta.json").is_file():
+        folders = [root]
+    if not folders:
+        raise ConfigError(f"{root}: no episode recordings (folders with a meta.json, as serpar "
+                          "run --record writes them)")
+    return [_episode(f, seed) for f in folders]
+
+
+def _episode(folder: Path, seed: int) -> RealEpisode:
+    meta = json.loads((folder / "meta.json").read_text())
+    model = meta.get("model") or {}
+    log = model.get("cell_log") or model.get("episode_config") or {}
+    notes: list[str] = []
+    keys = {k: log[k] for k in CELL_LOG_KEYS if k in log and k not in ("seed", "holes")}
+    if "seed" not in log:
+        notes.append(f"{folder.name}: the log gives no seed: part dimensions and the platform's "
+                     f"errors drawn from the tolerance distributions with seed {seed}")
+    holes = [r.get("hole") for r in meta.get("holes") or []]
+    if not holes or any(h is None for h in holes):
+        raise ConfigError(f"{folder}: hole records without a hole index: the simulator cannot "
+                          "be rerun on the same holes")
+    if isinstance(keys.get("stewart_calibration"), str) and keys["stewart_calibration"] not in (
+            "campaign", "none") and not Path(keys["stewart_calibration"]).is_file():
+        notes.append(f"{folder.name}: its calibration file {keys['stewart_calibration']} is not "
+                     "here; the simulator calibrates its platform by the campaign")
+        keys["stewart_calibration"] = "campaign"
+    cfg = EpisodeConfig(seed=int(log.get("seed", seed)), holes=tuple(int(h) for h in holes), **keys)
+    return RealEpisode(folder, cfg, tuple(notes))
+
+
+def rerun(episodes: list[RealEpisode], out: Path, plant_model: str | None,
+          contact_friction: float | None, tick: Tick) -> list[Path]:
+    """Record the simulator on each episode's seed and holes into ``out``."""
+    folders = []
+    for ep in episodes:
+        cfg = dataclasses.replace(ep.config, plant_model=plant_model,
+                                  contact_friction=contact_friction)
+        folder = recording_folder(out, cfg.seed)
+        run_episode(cfg, calibrated_pairs(cfg.camera_width), recording=folder,
+                    on_record=lambda r: tick(f"{out.name}: hole {r.hole} {r.outcome}"))
+        folders.append(folder)
+    return folders
+
+
+def compare(real: list[HoleOutcome], sim: list[HoleOutcome]) -> dict[str, OutcomeDiff]:
+    """Per outcome the mean paired difference (real - sim) over the holes, with its 95 % CI."""
+    by_hole = {(h.cycle, h.hole): h for h in sim}
+    out = {}
+    for name in OUTCOMES:
+        pairs = [r.values[name] - by_hole[(r.cycle, r.hole)].values[name] for r in real
+                 if (r.cycle, r.hole) in by_hole]
+        d = np.array([p for p in pairs if math.isfinite(p)])
+        mean = float(d.mean()) if d.size else None
+        ci = (float(stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / math.sqrt(d.size))
+              if d.size >= 2 else None)
+        out[name] = OutcomeDiff(mean, ci, int(d.size), tuple(float(x) for x in d))
+    return out
+
+
+def outcomes_of(folders: list[Path]) -> list[HoleOutcome]:
+    """Every hole of the recordings, keyed apart by the recording's order (cycle + 1000 k)."""
+    out = []
+    for k, folder in enumerate(folders):
+        out += [dataclasses.replace(h, cycle=h.cycle + 1000 * k) for h in hole_outcomes(folder)]
+    return out
+
+
+def diagnose_cell(episodes: list[RealEpisode], nominal: EpisodeConfig, source: str, seed: int
+                  ) -> tuple[Diagnosis, dict[str, object], list[str]]:
+    """Diagnose the longest recording against the simulator ``nominal`` builds; the combined
+    model (the simulator's effects updated by what the recording shows) and notes."""
+    longest = max(episodes, key=lambda e: len(e.config.holes))  # type: ignore[arg-type]
+    notes = [f"{e.folder.name}: not diagnosed (the longest recording, {longest.folder.name}, is)"
+             for e in episodes if e is not longest]
+    family = PriorFamily(family_from_recording(load_for_diagnosis(longest.folder)),
+                         model_from_config(nominal, source))
+    diag = diagnose(family, seed)
+    diag = dataclasses.replace(diag, model=family.combined_model(diag.model))
+    return diag, diag.model_file(str(longest.folder)), notes
+
+
+def updated_cell(model: dict[str, object], model_path: Path) -> tuple[str, float | None]:
+    """The rerun's plant model file and contact friction from an updated model."""
+    contact = None
+    params = model.get("params", {})
+    if "contact_friction" in model.get("effects", []):  # type: ignore[operator]
+        d_mu = float(params["contact_friction"]["values"][0])  # type: ignore[index]
+        contact = float(np.clip(NOMINAL_MU + d_mu, *MU_RANGE))
+    return str(model_path), contact
+
+
+def write_updated(model: dict[str, object], out: Path) -> tuple[Path, MjcfExport]:
+    """``updated.model.json`` and ``updated.xml`` of the updated model."""
+    path = out / "updated.model.json"
+    path.write_text(json.dumps(model, indent=2))
+    return path, export_arm_mjcf(parse_model(model, str(path)), out / "updated.xml")
+
+
+def established(diag: Diagnosis, model: dict[str, object]) -> list[dict[str, object]]:
+    """The established effects with their values in the updated model (a correction's value
+    is the simulator's plus the correction) and the diagnosis's sigma."""
+    blocks = model["params"]
+    out = []
+    for f in diag.established:
+        b = blocks[f.effect]  # type: ignore[index]
+        out.append({"effect": f.effect, "params": {n: [v, s] for n, v, s in
+                                                   zip(b["names"], b["values"], b["std"])}})
+    return out

@@ -1,0 +1,129 @@
+"""``serpar sim2real REAL_DIR``: the simulator against a real cell's assembly outcomes, before
+and after a diagnosis of that cell's recordings (checks/sim2real.py)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+from serpar.checks.sim2real import (
+    OutcomeDiff,
+    compare,
+    diagnose_cell,
+    established,
+    outcomes_of,
+    real_episodes,
+    rerun,
+    updated_cell,
+    write_updated,
+)
+from serpar.checks.sim2real_report import write_sim2real_report
+from serpar.cli import arg_types
+from serpar.cli.cmd_export_mjcf import export_summary
+from serpar.cli.out_paths import add_force, out_file, out_folder
+from serpar.cli.output import print_json, table
+from serpar.diagnosis.task_outcomes import OUTCOMES
+from serpar.errors import ConfigError
+from serpar.sim.mjcf_export import is_mjcf_path, read_any_model
+
+
+def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("sim2real", help="compare the simulator's assembly outcomes with a real "
+                                        "cell's recordings, diagnose them, and compare again")
+    p.add_argument("real_dir", metavar="REAL_DIR",
+                   help="serpar run --record episodes of the real cell (never written to)")
+    p.add_argument("--model", metavar="M.model.json|M.xml",
+                   help="the simulator's arm model to start from (default: the nominal cell)")
+    p.add_argument("--out", help="output folder (default REAL_DIR_sim2real): the reruns, "
+                                 "updated.model.json, updated.xml")
+    p.add_argument("--report", metavar="OUT.html", help="write the HTML report (table, plots)")
+    p.add_argument("--seed", type=arg_types.seed, default=0,
+                   help="seed of the diagnosis's split, and of the parts where a log has no seed")
+    add_force(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_sim2real)
+    return p
+
+
+def _beyond(d: OutcomeDiff) -> bool:
+    return d.diff is not None and d.ci is not None and abs(d.diff) > d.ci
+
+
+def verdict(before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff]) -> str:
+    missed = [n for n in OUTCOMES if _beyond(before[n])]
+    if not missed:
+        return "the nominal simulator's outcomes agree with the real cell's within their CIs"
+    fixed = [n for n in missed if after[n].diff is not None
+             and abs(after[n].diff) < abs(before[n].diff) and not _beyond(after[n])]  # type: ignore[arg-type]
+    still = [n for n in missed if n not in fixed]
+    return (f"beyond the CI with the nominal simulator: {', '.join(missed)}; after the update "
+            f"smaller and within the CI: {', '.join(fixed) or 'none'}"
+            + (f"; not: {', '.join(still)}" if still else ""))
+
+
+def cmd_sim2real(args: argparse.Namespace) -> int:
+    real = Path(args.real_dir)
+    out = Path(args.out) if args.out else real.with_name(real.name.rstrip("/") + "_sim2real")
+    if out.resolve() == real.resolve() or real.resolve() in out.resolve().parents:
+        raise ConfigError(f"--out {out}: inside REAL_DIR; sim2real never writes into the real "
+                          "cell's recordings")
+    report = out_file(args.report, "--report", args.force, suffix=".html") if args.report else None
+    episodes = real_episodes(real, args.seed)
+    start_model = None
+    if args.model:
+        if not (is_mjcf_path(args.model) or args.model.endswith(".json")):
+            raise ConfigError(f"--model {args.model}: a model file (.model.json or an exported .xml)")
+        read_any_model(args.model)  # a bad file fails before any simulation
+        start_model = args.model
+    folder = out_folder(out, "--out", args.force, ("updated.model.json", "updated.xml"))
+    folder.clear()
+    out.mkdir(parents=True, exist_ok=True)
+    quiet = args.json
+
+    def tick(msg: str) -> None:
+        if not quiet:
+            print(msg, file=sys.stderr)
+
+    notes = [n for e in episodes for n in e.notes]
+    real_outcomes = outcomes_of([e.folder for e in episodes])
+    tick(f"{len(real_outcomes)} holes in {len(episodes)} recording(s); the simulator on the same holes")
+    before = compare(real_outcomes, outcomes_of(rerun(episodes, out / "nominal", start_model, None, tick)))
+    tick("diagnosing the real recordings against it")
+    nominal = dataclasses.replace(episodes[0].config, plant_model=start_model)
+    diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell", args.seed)
+    notes += more
+    model_path, exported = write_updated(model, out)
+    plant, contact = updated_cell(model, model_path)
+    tick(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
+         "updated simulator on the same holes")
+    after = compare(real_outcomes, outcomes_of(rerun(episodes, out / "updated", plant, contact, tick)))
+    found = established(diag, model)
+    words = verdict(before, after)
+    if report is not None:
+        write_sim2real_report(report, str(real), before, after, found, notes, words)
+    if args.json:
+        print_json({"real_dir": str(real), "out": str(out), "holes": len(real_outcomes),
+                    "outcomes": {n: {"unit": OUTCOMES[n], "before": before[n].as_dict(),
+                                     "after": after[n].as_dict()} for n in OUTCOMES},
+                    "established": found, "diagnosis_verdict": diag.verdict,
+                    "updated_model": str(model_path), "mjcf": export_summary(exported),
+                    "contact_friction": contact, "verdict": words, "notes": notes,
+                    "report": None if report is None else str(report)})
+        return 0
+    for n in notes:
+        print(f"note: {n}")
+    print(table(["outcome", "unit", "holes", "nominal: real - sim", "updated: real - sim"],
+                [[n, OUTCOMES[n], before[n].n, _fmt(before[n]), _fmt(after[n])] for n in OUTCOMES]))
+    print(f"diagnosis: {diag.verdict}")
+    print(f"verdict: {words}")
+    print(f"updated model: {model_path}   MJCF: {exported.path}"
+          + (f"   report: {report}" if report else ""))
+    return 0
+
+
+def _fmt(d: OutcomeDiff) -> str:
+    if d.diff is None:
+        return "-"
+    return f"{d.diff:+.4g}" + (f" ± {d.ci:.3g}" if d.ci is not None else " (n < 2)")

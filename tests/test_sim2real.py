@@ -1,0 +1,97 @@
+"""`serpar sim2real` (checks/sim2real.py) and the per-hole task outcomes it compares
+(diagnosis/task_outcomes.py)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from serpar.checks.sim2real import compare, real_episodes
+from serpar.cli.entry import main
+from serpar.diagnosis.task_outcomes import OUTCOMES, HoleOutcome
+from serpar.errors import ConfigError
+
+
+def _holes(values: list[float], name: str = "peak_axial_force") -> list[HoleOutcome]:
+    base = dict.fromkeys(OUTCOMES, 0.0)
+    return [HoleOutcome(k, k, {**base, name: v}) for k, v in enumerate(values)]
+
+
+def test_paired_difference_and_its_t_interval() -> None:
+    real = _holes([5.0, 5.4, 5.1, float("nan")])
+    sim = _holes([4.8, 5.0, 5.2, 5.0])
+    d = compare(real, sim)["peak_axial_force"]
+    pairs = np.array([0.2, 0.4, -0.1])  # the NaN hole is left out
+    assert d.n == 3 and d.diff == pytest.approx(pairs.mean())
+    assert d.ci == pytest.approx(stats.t.ppf(0.975, 2) * pairs.std(ddof=1) / math.sqrt(3))
+    one = compare(_holes([5.0]), _holes([4.0]))["peak_axial_force"]
+    assert one.diff == pytest.approx(1.0) and one.ci is None  # no interval from one hole
+    assert compare(_holes([1.0]), _holes([1.0], "jam"))["seated"].diff == 0.0
+
+
+def _meta(folder: Path, model: dict, holes: list) -> Path:
+    folder.mkdir(parents=True)
+    (folder / "meta.json").write_text(json.dumps({"model": model, "holes": holes}))
+    return folder
+
+
+def test_the_rerun_takes_the_log_never_the_physics(tmp_path) -> None:
+    """A simulated recording's meta holds its whole config: the rerun keeps the task keys and
+    drops the physics (friction, contact friction, plant model, hidden errors)."""
+    holes = [{"cycle": 0, "hole": 7}, {"cycle": 1, "hole": 3}]
+    full = {"episode_config": {"seed": 4, "holes": 2, "controller": "impedance",
+                               "arm_friction": 2.5, "arm_friction_form": "gaz",
+                               "contact_friction": 0.45, "plant_model": "/secret.json"}}
+    (ep,) = real_episodes(_meta(tmp_path / "a" / "episode_4", full, holes))
+    assert ep.config.seed == 4 and ep.config.holes == (7, 3)
+    assert ep.config.controller == "impedance"
+    assert ep.config.arm_friction == 0.3 and ep.config.arm_friction_form == "coulomb"
+    assert ep.config.contact_friction is None and ep.config.plant_model is None
+    (ep,) = real_episodes(_meta(tmp_path / "b" / "episode_x", {"cell_log": {"holes": 1}},
+                                [{"cycle": 0, "hole": 5}]), seed=9)
+    assert ep.config.seed == 9 and "no seed" in ep.notes[0]
+    with pytest.raises(ConfigError, match="without a hole index"):
+        real_episodes(_meta(tmp_path / "c" / "e", {"cell_log": {"seed": 1}},
+                            [{"cycle": 0, "hole": None}]))
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ConfigError, match="no episode recordings"):
+        real_episodes(tmp_path / "empty")
+    with pytest.raises(ConfigError, match="not a folder"):
+        real_episodes(tmp_path / "missing")
+
+
+def test_sim2real_never_writes_into_the_real_recordings(tmp_path, capsys) -> None:
+    real = _meta(tmp_path / "real" / "episode_0", {"cell_log": {"seed": 0}},
+                 [{"cycle": 0, "hole": 0}]).parent
+    assert main(["sim2real", str(real), "--out", str(real / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "inside REAL_DIR" in err and err.count("\n") == 1
+    assert sorted(p.name for p in real.iterdir()) == ["episode_0"]
+
+
+@pytest.mark.slow
+def test_sim2real_on_a_concealed_cell_moves_the_outcomes_toward_it(tmp_path, capsys) -> None:
+    """CI-sized: a 1-hole cell whose drive acts 0.5-2 ms late. The diagnosis finds the latency
+    within 2 sigma; the updated simulator's outcomes are nearer the cell's than the nominal's."""
+    cell = tmp_path / "cell"
+    assert main(["twin", "--domain", "cell", "--effect", "latency", "--seed", "5", "--holes",
+                 "1", "--out", str(cell), "--json"]) == 0
+    capsys.readouterr()
+    truth = json.loads((cell / "answer.json").read_text())["effects"][0]["params"]["delay"]
+    assert main(["sim2real", str(cell), "--out", str(tmp_path / "s2r"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    (found,) = out["established"]
+    value, sigma = found["params"]["delay"]
+    assert found["effect"] == "latency" and abs(value - truth) <= 2 * sigma
+    before = {n: abs(o["before"]["diff"]) for n, o in out["outcomes"].items()}
+    after = {n: abs(o["after"]["diff"]) for n, o in out["outcomes"].items()}
+    assert all(after[n] <= before[n] for n in OUTCOMES)
+    assert sum(after.values()) < sum(before.values())  # the direction: toward the cell
+    assert out["mjcf"]["applied"] == ["joint_friction", "latency"]
+    assert (tmp_path / "s2r" / "updated.xml").is_file()
+    assert sorted(p.name for p in cell.iterdir()) == ["answer.json", "answer.model.json", "episode_5"]
