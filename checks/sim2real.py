@@ -62,6 +62,11 @@ class OutcomeDiff:
     def as_dict(self) -> dict[str, object]:
         return {"diff": self.diff, "ci": self.ci, "n": self.n}
 
+    def words(self) -> str:
+        if self.diff is None:
+            return "-"
+        return f"{self.diff:+.4g}" + (f" ± {self.ci:.3g}" if self.ci is not None else " (n < 2)")
+
 
 def real_episodes(real_dir: str | Path, seed: int = 0) -> list[RealEpisode]:
     """The episode recordings in ``real_dir`` (``episode_*`` folders, or the folder itself)."""

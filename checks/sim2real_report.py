@@ -13,12 +13,6 @@ from serpar.diagnosis.report_html import _png
 from serpar.diagnosis.task_outcomes import OUTCOMES
 
 
-def _fmt(d: OutcomeDiff) -> str:
-    if d.diff is None:
-        return "—"
-    return f"{d.diff:+.4g}" + (f" ± {d.ci:.3g}" if d.ci is not None else " (n < 2)")
-
-
 def _plots(before: Mapping[str, OutcomeDiff], after: Mapping[str, OutcomeDiff]) -> str:
     import matplotlib
 
@@ -44,8 +38,8 @@ def write_sim2real_report(path: Path, real_dir: str, before: Mapping[str, Outcom
                           after: Mapping[str, OutcomeDiff], established: Sequence[Mapping[str, object]],
                           notes: Sequence[str], verdict: str) -> Path:
     rows = "".join(
-        f"<tr><td>{n}</td><td>{OUTCOMES[n]}</td><td>{before[n].n}</td><td>{_fmt(before[n])}</td>"
-        f"<td>{_fmt(after[n])}</td></tr>" for n in OUTCOMES)
+        f"<tr><td>{n}</td><td>{OUTCOMES[n]}</td><td>{before[n].n}</td><td>{before[n].words()}</td>"
+        f"<td>{after[n].words()}</td></tr>" for n in OUTCOMES)
     found = "".join(f"<li>{html.escape(str(e['effect']))}: " + html.escape(", ".join(
         f"{k} = {v[0]:.4g} ± {v[1]:.2g}" for k, v in e["params"].items())) + "</li>"  # type: ignore[union-attr]
         for e in established) or "<li>none</li>"

@@ -115,15 +115,10 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     for n in notes:
         print(f"note: {n}")
     print(table(["outcome", "unit", "holes", "nominal: real - sim", "updated: real - sim"],
-                [[n, OUTCOMES[n], before[n].n, _fmt(before[n]), _fmt(after[n])] for n in OUTCOMES]))
+                [[n, OUTCOMES[n], before[n].n, before[n].words(), after[n].words()] for n in OUTCOMES]))
     print(f"diagnosis: {diag.verdict}")
     print(f"verdict: {words}")
     print(f"updated model: {model_path}   MJCF: {exported.path}"
           + (f"   report: {report}" if report else ""))
     return 0
 
-
-def _fmt(d: OutcomeDiff) -> str:
-    if d.diff is None:
-        return "-"
-    return f"{d.diff:+.4g}" + (f" ± {d.ci:.3g}" if d.ci is not None else " (n < 2)")
