@@ -24,7 +24,7 @@ from serpar.cli import arg_types
 from serpar.cli.cmd_export_mjcf import export_summary
 from serpar.cli.out_paths import add_force, out_file, out_folder
 from serpar.cli.output import print_json, table
-from serpar.diagnosis.task_outcomes import OUTCOMES
+from serpar.diagnosis.task_outcomes import OUTCOMES, RESOLUTION
 from serpar.errors import ConfigError
 from serpar.sim.mjcf_export import is_mjcf_path, read_any_model
 
@@ -47,16 +47,18 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def _beyond(d: OutcomeDiff) -> bool:
-    return d.diff is not None and d.ci is not None and abs(d.diff) > d.ci
+def _beyond(name: str, d: OutcomeDiff) -> bool:
+    """The difference is beyond its CI and beyond what the outcome is measured to."""
+    return (d.diff is not None and d.ci is not None
+            and abs(d.diff) > max(d.ci, RESOLUTION.get(name, 0.0)) + 1e-12)
 
 
 def verdict(before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff]) -> str:
-    missed = [n for n in OUTCOMES if _beyond(before[n])]
+    missed = [n for n in OUTCOMES if _beyond(n, before[n])]
     if not missed:
         return "the nominal simulator's outcomes agree with the real cell's within their CIs"
     fixed = [n for n in missed if after[n].diff is not None
-             and abs(after[n].diff) < abs(before[n].diff) and not _beyond(after[n])]  # type: ignore[arg-type]
+             and abs(after[n].diff) < abs(before[n].diff) and not _beyond(n, after[n])]  # type: ignore[arg-type]
     still = [n for n in missed if n not in fixed]
     return (f"beyond the CI with the nominal simulator: {', '.join(missed)}; after the update "
             f"smaller and within the CI: {', '.join(fixed) or 'none'}"

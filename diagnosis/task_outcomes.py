@@ -47,6 +47,10 @@ OUTCOMES: dict[str, str] = {
     "contact_to_seated": "s", "misalignment_at_contact": "mm", "chamfer_slide": "1", "jam": "1",
 }
 """Outcome name -> unit, in report order."""
+RESOLUTION: dict[str, float] = {"contact_to_seated": 1e-3}
+"""What an outcome is measured to: a time in samples of the 1 kHz log. A paired difference
+within it is agreement, whatever the spread of the pairs (two holes 1 ms apart each have a
+zero-width interval)."""
 SEATED_BAND_M = 20e-6
 """[m] The TCP is seated once within this of its final height (the journal's last 0.02 mm)."""
 SKIP_S = 0.05
