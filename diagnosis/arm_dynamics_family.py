@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_effects import BASELINE, COMMAND_ONLY, EFFECTS, EffectModels
 from serpar.diagnosis.arm_dynamics_empirical import arm_library
+from serpar.diagnosis.arm_dynamics_jacobian import residual_jacobian
 from serpar.diagnosis.arm_dynamics_signals import SmoothingConfig, read_arm_series
 from serpar.diagnosis.arm_dynamics_terms import Terms, compute_terms, row_sigma
 from serpar.diagnosis.empirical import BasisGroup
@@ -97,6 +98,22 @@ class ArmDynamicsFamily:
 
     # -- Family protocol -------------------------------------------------------------------
     def residual(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
+        link, drive, link_band, band, sigma_link, sigma_drive = self.misfits(params, rows)
+        # stiction: within the band a residual is static friction, not a misfit
+        drive = np.sign(drive) * np.maximum(np.abs(drive) - band, 0.0)
+        link = np.sign(link) * np.maximum(np.abs(link) - link_band, 0.0)
+        if not self.terms.has_command:
+            return (link / sigma_link).ravel()
+        return np.hstack([link / sigma_link, drive / sigma_drive]).ravel()
+
+    def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
+        """d residual / d params (diagnosis/arm_dynamics_jacobian.py)."""
+        return residual_jacobian(self, params, rows)
+
+    def misfits(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
+                 ) -> tuple[Vec, Vec, Vec, Vec, Vec, Vec]:
+        """Per row and joint: the link and drive misfits before the stiction band, the band of
+        each, and each channel's sigma [N m]."""
         rows = np.asarray(rows, np.int64)
         t = self.terms
         link_model, drive_model, link_band, band = self._models.contributions(params, rows)
@@ -104,9 +121,6 @@ class ArmDynamicsFamily:
         if BASELINE.name in params:
             link = link - self._tare(params[BASELINE.name], rows)
         drive = t.drive[rows] - drive_model
-        # stiction: within the band a residual is static friction, not a misfit
-        drive = np.sign(drive) * np.maximum(np.abs(drive) - band, 0.0)
-        link = np.sign(link) * np.maximum(np.abs(link) - link_band, 0.0)
         added = self._models.added_inertia(params, rows)
         if added is None:
             sigma_link, sigma_drive = t.sigma_link[rows], t.sigma_drive[rows]
@@ -115,9 +129,7 @@ class ArmDynamicsFamily:
                                                 t.mass_link[rows] + added, t.mass_full[rows] + added)
         if self._tare_var is not None:
             sigma_link = np.sqrt(sigma_link**2 + self._tare_var[rows, None])
-        if not t.has_command:
-            return (link / sigma_link).ravel()
-        return np.hstack([link / sigma_link, drive / sigma_drive]).ravel()
+        return link, drive, link_band, band, sigma_link, sigma_drive
 
     def noise_ratio(self, rows: NDArray[np.int64], whitened: Vec) -> tuple[float, str] | None:
         """The data's noise over the stated sigma, from sample-to-sample differences (white

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_family import ArmDynamicsConfig, ArmDynamicsFamily
 from serpar.diagnosis.arm_dynamics_family import family_from_recording as dynamics_family
+from serpar.diagnosis.arm_dynamics_jacobian import FD_STEP
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.insertion_friction import EFFECT as FRICTION
 from serpar.diagnosis.insertion_friction import ChamferSlides, chamfer_slides
@@ -111,6 +112,33 @@ class EpisodeFamily:
         if self.slides is None or slide.size == 0:
             return out
         return np.concatenate([out, self.slides.residual(params.get(FRICTION.name), slide)])
+
+    def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
+        """The arm rows' Jacobian (the inner family's), then the chamfer slides', which only
+        the contact friction moves (by differences, as the fit's own would take them)."""
+        arm, slide = self._parts(rows)
+        inner = {k: v for k, v in params.items() if k != FRICTION.name}
+        j_arm = self.inner.jacobian(inner, self.keep[arm])
+        sizes = {k: np.asarray(v).size for k, v in params.items()}
+        n_slide = slide.size if self.slides is not None else 0
+        out = np.zeros((j_arm.shape[0] + n_slide, sum(sizes.values())))
+        col, inner_col = 0, 0
+        for name, size in sizes.items():
+            if name == FRICTION.name:
+                if n_slide:
+                    out[j_arm.shape[0]:, col] = self._slide_column(params[name], slide)
+            else:
+                out[:j_arm.shape[0], col:col + size] = j_arm[:, inner_col:inner_col + size]
+                inner_col += size
+            col += size
+        return out
+
+    def _slide_column(self, d_mu: Vec, slide: NDArray[np.int64]) -> Vec:
+        assert self.slides is not None
+        x = np.asarray(d_mu, float)
+        v = x.copy()
+        v[0] += FD_STEP * (1.0 if v[0] >= 0 else -1.0) * max(1.0, abs(v[0]))
+        return (self.slides.residual(v, slide) - self.slides.residual(x, slide)) / (v[0] - x[0])
 
     def folds(self, k: int) -> list[tuple[NDArray[np.int64], NDArray[np.int64]]]:
         """The engine's folds over the free-motion rows, with the chamfer slides dealt to the

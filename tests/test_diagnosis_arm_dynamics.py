@@ -59,6 +59,34 @@ def single_fits(effect: str | None):
     return _FITS[effect]
 
 
+def test_the_jacobian_is_the_fits_own_differences_with_exact_tares() -> None:
+    """The family's Jacobian (diagnosis/arm_dynamics_jacobian.py) against scipy's 2-point
+    differences of its residual: the effects' columns equal, the tares' (exact) within the
+    differences' own error; a wrong sign or a dropped stiction band would be ~100 % off."""
+    from scipy.optimize._numdiff import approx_derivative
+
+    _, _, fam, train, _, _ = twin("joint_friction")
+    by_name = {e.name: e for e in fam.effects}
+    rng = np.random.default_rng(3)
+    params = {fam.baseline.name: rng.normal(0.0, 0.05, fam.baseline.n_params),
+              "joint_friction": by_name["joint_friction"].x0 + 0.2,
+              "payload": by_name["payload"].x0 + 0.01, "latency": np.array([0.002])}
+    sizes = {k: v.size for k, v in params.items()}
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        out, k = {}, 0
+        for name, n in sizes.items():
+            out[name], k = x[k:k + n], k + n
+        return fam.residual(out, train)
+
+    want = approx_derivative(fun, np.concatenate(list(params.values())), method="2-point")
+    got = fam.jacobian(params, train)
+    n_tare = sizes[fam.baseline.name]
+    np.testing.assert_array_equal(got[:, n_tare:], want[:, n_tare:])
+    scale = np.abs(want[:, :n_tare]).max()
+    assert np.abs(got[:, :n_tare] - want[:, :n_tare]).max() < 1e-6 * scale
+
+
 def test_family_implements_the_contract() -> None:
     _, _, fam, train, _, _ = twin(None)
     assert isinstance(fam, Family)
