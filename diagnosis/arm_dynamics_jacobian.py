@@ -5,7 +5,7 @@ like x) for every effect's parameters, and exact columns for the torque tares: a
 the link channel linearly, so its column is minus its interpolation weight at the row, through
 the stiction band, over the row's sigma. An episode's drifting tare has seven parameters per
 knot, hundreds in all, each of which cost a whole residual evaluation by differences: with
-them exact, a 12-hole episode's fit evaluates the residual ~50 times per step instead of ~500.
+them exact, a 12-hole episode's Jacobian costs ~30 residual evaluations instead of ~290.
 """
 
 from __future__ import annotations
