@@ -155,14 +155,12 @@ def diagnose_cell(episodes: list[RealEpisode], nominal: EpisodeConfig, source: s
     return diag, diag.model_file(str(longest.folder)), notes
 
 
-def updated_cell(model: dict[str, object], model_path: Path) -> tuple[str, float | None]:
-    """The rerun's plant model file and contact friction from an updated model."""
-    contact = None
-    params = model.get("params", {})
-    if "contact_friction" in model.get("effects", []):  # type: ignore[operator]
-        d_mu = float(params["contact_friction"]["values"][0])  # type: ignore[index]
-        contact = float(np.clip(NOMINAL_MU + d_mu, *MU_RANGE))
-    return str(model_path), contact
+def updated_contact_friction(model: dict[str, object]) -> float | None:
+    """The rerun's journal/bore friction from an updated model (None: the nominal one)."""
+    if "contact_friction" not in model.get("effects", []):  # type: ignore[operator]
+        return None
+    d_mu = float(model["params"]["contact_friction"]["values"][0])  # type: ignore[index]
+    return float(np.clip(NOMINAL_MU + d_mu, *MU_RANGE))
 
 
 def write_updated(model: dict[str, object], out: Path) -> tuple[Path, MjcfExport]:

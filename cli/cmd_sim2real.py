@@ -16,7 +16,7 @@ from serpar.checks.sim2real import (
     outcomes_of,
     real_episodes,
     rerun,
-    updated_cell,
+    updated_contact_friction,
     write_updated,
 )
 from serpar.checks.sim2real_report import write_sim2real_report
@@ -97,10 +97,10 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell", args.seed)
     notes += more
     model_path, exported = write_updated(model, out)
-    plant, contact = updated_cell(model, model_path)
+    contact = updated_contact_friction(model)
     tick(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
          "updated simulator on the same holes")
-    after = compare(real_outcomes, outcomes_of(rerun(episodes, out / "updated", plant, contact, tick)))
+    after = compare(real_outcomes, outcomes_of(rerun(episodes, out / "updated", str(model_path), contact, tick)))
     found = established(diag, model)
     words = verdict(before, after)
     if report is not None:

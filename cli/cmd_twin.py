@@ -5,15 +5,13 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
 from serpar.cli import arg_types
 from serpar.cli.out_paths import RECORDING_FILES, add_force, out_folder
 from serpar.cli.output import print_json
 from serpar.errors import ConfigError
 from serpar.sim.recording import write_recording
 from serpar.sim.strict_json import dumps
-from serpar.twins.cell_twin import ANSWER_FILE, PLANT_FILE, draw_effects, make_cell_twin
+from serpar.twins.cell_twin import ANSWER_FILE, PLANT_FILE, check_effect, make_cell_twin
 from serpar.twins.cell_twin import EFFECTS as CELL_EFFECTS
 from serpar.twins.registry import effects, make_twin
 
@@ -81,7 +79,7 @@ def _cell_twin(args: argparse.Namespace) -> int:
     if args.magnitude is not None or args.sigma_error != 1.0:
         raise ConfigError("--magnitude and --sigma-error do not apply to --domain cell (its "
                           "effects are drawn from twins/cell_twin.py's ranges)")
-    draw_effects(args.effect, np.random.default_rng(0))  # a bad name fails before any work
+    check_effect(args.effect)  # a bad name fails before any work
     folder.clear()
     show = not args.json
 

@@ -24,6 +24,11 @@ FD_STEP = float(np.sqrt(np.finfo(float).eps))
 """scipy.optimize's relative step for 2-point differences."""
 
 
+def forward_step(x: float) -> float:
+    """scipy's 2-point step at ``x``, as the float it lands on minus ``x``."""
+    return (x + FD_STEP * (1.0 if x >= 0 else -1.0) * max(1.0, abs(x))) - x
+
+
 class _ArmFamily(Protocol):
     terms: Terms
     _knots: Vec | None
@@ -69,7 +74,7 @@ def residual_jacobian(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArr
             continue
         for i in range(values.size):
             v = values.copy()
-            v[i] += FD_STEP * (1.0 if v[i] >= 0 else -1.0) * max(1.0, abs(v[i]))
-            step = v[i] - values[i]  # the step as represented
+            step = forward_step(v[i])
+            v[i] += step
             cols.append(((family.residual({**params, name: v}, rows) - base) / step)[:, None])
     return np.hstack(cols) if cols else np.zeros((base.size, 0))

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_family import ArmDynamicsConfig, ArmDynamicsFamily
 from serpar.diagnosis.arm_dynamics_family import family_from_recording as dynamics_family
-from serpar.diagnosis.arm_dynamics_jacobian import FD_STEP
+from serpar.diagnosis.arm_dynamics_jacobian import forward_step
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.insertion_friction import EFFECT as FRICTION
 from serpar.diagnosis.insertion_friction import ChamferSlides, chamfer_slides
@@ -136,9 +136,8 @@ class EpisodeFamily:
     def _slide_column(self, d_mu: Vec, slide: NDArray[np.int64]) -> Vec:
         assert self.slides is not None
         x = np.asarray(d_mu, float)
-        v = x.copy()
-        v[0] += FD_STEP * (1.0 if v[0] >= 0 else -1.0) * max(1.0, abs(v[0]))
-        return (self.slides.residual(v, slide) - self.slides.residual(x, slide)) / (v[0] - x[0])
+        step = forward_step(float(x[0]))
+        return (self.slides.residual(x + step, slide) - self.slides.residual(x, slide)) / step
 
     def folds(self, k: int) -> list[tuple[NDArray[np.int64], NDArray[np.int64]]]:
         """The engine's folds over the free-motion rows, with the chamfer slides dealt to the

@@ -55,17 +55,20 @@ PLANT_FILE = "answer.model.json"
 ANSWER_FILE = "answer.json"
 
 
+def check_effect(effect: str) -> None:
+    """ConfigError naming the valid choices unless ``effect`` is mix, none or a cell effect."""
+    if effect not in ("mix", "none", *EFFECTS):
+        raise ConfigError(f"unknown cell effect {effect!r}; valid: mix, none, {', '.join(EFFECTS)}")
+
+
 def draw_effects(effect: str, rng: np.random.Generator) -> tuple[str, ...]:
     """The effects of a twin: ``mix`` (two to four), one name, or ``none``."""
+    check_effect(effect)
     if effect == "mix":
         k = int(rng.integers(2, 5))
         return tuple(sorted((str(e) for e in rng.choice(EFFECTS, size=k, replace=False)),
                             key=EFFECTS.index))
-    if effect == "none":
-        return ()
-    if effect not in EFFECTS:
-        raise ConfigError(f"unknown cell effect {effect!r}; valid: mix, none, {', '.join(EFFECTS)}")
-    return (effect,)
+    return () if effect == "none" else (effect,)
 
 
 def _block(params: dict[str, float]) -> dict[str, list]:
@@ -119,13 +122,12 @@ def concealed_cell(effect: str, seed: int, holes: int
             answers.append({"effect": name, "params": {"d_mu": mu - NOMINAL_MU}, "mu": mu})
     model = ({"source": "serpar twin --domain cell (the concealed truth)", "kind": "arm_dynamics",
               "effects": list(plant), "params": plant} if plant else None)
-    cfg = dataclasses.replace(NOMINAL, seed=seed, holes=holes, **changes)  # type: ignore[arg-type]
     answer: dict[str, object] = {
         "domain": "cell", "effect": effect, "effects": answers, "seed": seed, "holes": holes,
         "nominal": "EpisodeConfig() defaults: arm_friction 0.3 (coulomb), contact_friction "
                    f"{NOMINAL_MU}, no delays, no payload",
-        "concealed_config": {k: v for k, v in dataclasses.asdict(cfg).items()
-                             if k in ("arm_friction", "arm_friction_form", "contact_friction")}}
+        "concealed_config": {k: changes.get(k, getattr(NOMINAL, k)) for k in
+                             ("arm_friction", "arm_friction_form", "contact_friction")}}
     return changes, answer, model
 
 
