@@ -15,11 +15,12 @@ from dataclasses import dataclass, field
 from itertools import pairwise
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_effects import BASELINE, COMMAND_ONLY, EFFECTS, EffectModels
 from serpar.diagnosis.arm_dynamics_empirical import arm_library
-from serpar.diagnosis.arm_dynamics_jacobian import residual_jacobian
+from serpar.diagnosis.arm_dynamics_jacobian import residual_jacobian, tare_columns
 from serpar.diagnosis.arm_dynamics_signals import SmoothingConfig, read_arm_series
 from serpar.diagnosis.arm_dynamics_terms import Terms, compute_terms, row_sigma
 from serpar.diagnosis.empirical import BasisGroup
@@ -109,6 +110,11 @@ class ArmDynamicsFamily:
     def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
         """d residual / d params (diagnosis/arm_dynamics_jacobian.py)."""
         return residual_jacobian(self, params, rows)
+
+    def baseline_columns(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
+                         ) -> sp.csr_matrix:
+        """d residual / d tare, sparse (fitted by variable projection: diagnosis/separable.py)."""
+        return tare_columns(self, params, rows)
 
     def misfits(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
                  ) -> tuple[Vec, Vec, Vec, Vec, Vec, Vec]:

@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from typing import Protocol
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_effects import BASELINE
@@ -49,16 +50,24 @@ def _tare_weights(family: _ArmFamily, rows: NDArray[np.int64]) -> Vec:
     return np.stack([np.interp(t, knots, eye[k]) for k in range(len(knots))])
 
 
-def tare_columns(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
-    """The residual's exact derivative by every tare parameter (knot-major, 7 per knot)."""
+def tare_columns(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64]
+                 ) -> sp.csr_matrix:
+    """The residual's exact derivative by every tare parameter (knot-major, 7 per knot),
+    sparse: a row's link channel depends on the two knots around it, its drive channel on none."""
     link, _, link_band, _, sigma_link, _ = family.misfits(params, rows)
     slope = (np.abs(link) > link_band) / sigma_link  # rows x 7: through the band, whitened
     weights = _tare_weights(family, rows)  # knots x rows
     n_ch = 14 if family.terms.has_command else 7
-    out = np.zeros((len(rows), n_ch, weights.shape[0], 7))
+    knot, row = np.nonzero(weights)
+    r_idx, c_idx, vals = [], [], []
     for j in range(7):
-        out[:, j, :, j] = -(weights * slope[:, j]).T
-    return out.reshape(len(rows) * n_ch, weights.shape[0] * 7)
+        v = -weights[knot, row] * slope[row, j]
+        keep = v != 0
+        r_idx.append(row[keep] * n_ch + j)
+        c_idx.append(knot[keep] * 7 + j)
+        vals.append(v[keep])
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(r_idx), np.concatenate(c_idx))),
+                         shape=(len(rows) * n_ch, weights.shape[0] * 7))
 
 
 def residual_jacobian(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64]
@@ -70,7 +79,7 @@ def residual_jacobian(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArr
     for name, values in params.items():
         values = np.asarray(values, float)
         if name == BASELINE.name:
-            cols.append(tare_columns(family, params, rows))
+            cols.append(tare_columns(family, params, rows).toarray())
             continue
         for i in range(values.size):
             v = values.copy()

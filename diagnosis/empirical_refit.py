@@ -37,6 +37,10 @@ class WithTerm:
         self.effects = tuple(family.effects) + (self.block,)
         if callable(getattr(family, "jacobian", None)):
             self.jacobian = self._jacobian
+        if callable(getattr(family, "baseline_columns", None)):
+            # the term's columns do not depend on the baseline: the inner family's are these
+            self.baseline_columns = lambda params, rows: family.baseline_columns(  # type: ignore[attr-defined]
+                self._inner(params), rows)
 
     def _inner(self, params: Mapping[str, Vec]) -> dict[str, Vec]:
         return {n: v for n, v in params.items() if n != EMPIRICAL}

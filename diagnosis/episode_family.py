@@ -26,6 +26,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_family import ArmDynamicsConfig, ArmDynamicsFamily
@@ -132,6 +133,15 @@ class EpisodeFamily:
                 inner_col += size
             col += size
         return out
+
+    def baseline_columns(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
+                         ) -> sp.csr_matrix:
+        """The arm rows' tare columns; the chamfer slides do not depend on the tare."""
+        arm, slide = self._parts(rows)
+        inner = {k: v for k, v in params.items() if k != FRICTION.name}
+        b = self.inner.baseline_columns(inner, self.keep[arm])
+        n_slide = slide.size if self.slides is not None else 0
+        return sp.vstack([b, sp.csr_matrix((n_slide, b.shape[1]))], format="csr")
 
     def _slide_column(self, d_mu: Vec, slide: NDArray[np.int64]) -> Vec:
         assert self.slides is not None

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from serpar.diagnosis.family import Effect, Family
+from serpar.diagnosis.separable import profile, projected
 from serpar.errors import IdentificationError
 
 BASELINE = "baseline"
@@ -108,11 +109,15 @@ def fit_model(family: Family, active: tuple[str, ...], train: NDArray[np.int64],
     def fun(xf: NDArray[np.float64]) -> NDArray[np.float64]:
         return family.residual(unpack(blocks, full(xf)), train)
 
+    exact = getattr(family, "jacobian", None)
+    if (callable(getattr(family, "baseline_columns", None)) and callable(exact)
+            and family.baseline is not None and blocks[0] is family.baseline
+            and not blocks[0].fixed):
+        return _fit_separable(family, active, blocks, x0, free, lo, hi, train, heldout)
     if not free.any():
         r = fun(x0[free])
         return _score(family, active, blocks, x0, r, np.zeros((r.size, x0.size)), heldout, 1)
     # a family may offer its exact Jacobian (columns in block order); else 2-point differences
-    exact = getattr(family, "jacobian", None)
     jac = ("2-point" if not callable(exact)
            else (lambda xf: exact(unpack(blocks, full(xf)), train)[:, free]))
     n_free = int(free.sum())
@@ -125,6 +130,56 @@ def fit_model(family: Family, active: tuple[str, ...], train: NDArray[np.int64],
     jac_full = np.zeros((sol.fun.size, free.size))
     jac_full[:, free] = sol.jac
     return _score(family, active, blocks, full(sol.x), sol.fun, jac_full, heldout, int(sol.nfev))
+
+
+def _fit_separable(family: Family, active: tuple[str, ...], blocks: tuple[Effect, ...],
+                   x0: NDArray[np.float64], free: NDArray[np.bool_], lo: NDArray[np.float64],
+                   hi: NDArray[np.float64], train: NDArray[np.int64],
+                   heldout: NDArray[np.int64]) -> Fit:
+    """:func:`fit_model` by variable projection (diagnosis/separable.py): the effects fitted on
+    the residual with the baseline solved out at every evaluation."""
+    base = blocks[0]
+    nb = base.n_params
+    outer = free.copy()
+    outer[:nb] = False
+    last: dict[str, object] = {"t": x0[:nb].copy()}
+
+    def full(xo: NDArray[np.float64]) -> NDArray[np.float64]:
+        x = np.zeros(free.size)
+        x[:nb] = last["t"]
+        x[outer] = xo
+        return x
+
+    def solve(xo: NDArray[np.float64]) -> NDArray[np.float64]:
+        key = xo.tobytes()
+        if last.get("key") != key:
+            t, r = profile(family, unpack(blocks, full(xo)), base.name, base.lower, base.upper,
+                           train)  # type: ignore[arg-type]
+            last.update(key=key, t=t, r=r)
+        return last["r"]  # type: ignore[return-value]
+
+    def jac(xo: NDArray[np.float64]) -> NDArray[np.float64]:
+        solve(xo)
+        params = unpack(blocks, full(xo))
+        j = family.jacobian(params, train)[:, free]  # type: ignore[attr-defined]
+        return projected(j, nb, family.baseline_columns(params, train))  # type: ignore[attr-defined]
+
+    nfev = 1
+    if outer.any():
+        sol = least_squares(solve, x0[outer], jac=jac, bounds=(lo[outer], hi[outer]),
+                            method="trf", x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10,
+                            max_nfev=200 * (int(outer.sum()) + 1))
+        xo, nfev = sol.x, int(sol.nfev)
+    else:
+        xo = x0[outer]
+    r = solve(xo)
+    if not np.all(np.isfinite(r)):
+        raise IdentificationError(f"the fit of {'+'.join(active) or 'the baseline'} produced "
+                                  "non-finite residuals")
+    x = full(xo)
+    jac_full = np.zeros((r.size, free.size))
+    jac_full[:, free] = family.jacobian(unpack(blocks, x), train)[:, free]  # type: ignore[attr-defined]
+    return _score(family, active, blocks, x, r, jac_full, heldout, nfev)
 
 
 def _free_mask(blocks: tuple[Effect, ...]) -> NDArray[np.bool_]:

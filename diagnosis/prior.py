@@ -68,6 +68,8 @@ class PriorFamily:
             self._correction(e) if e.name in self.fixed else e for e in inner.effects)
         if callable(getattr(inner, "jacobian", None)):
             self.jacobian = self._jacobian
+        if callable(getattr(inner, "baseline_columns", None)):
+            self.baseline_columns = self._baseline_columns
 
     @property
     def max_effects(self) -> int:
@@ -99,6 +101,9 @@ class PriorFamily:
         # correction's derivative is its full value's (value = prior + correction)
         k = sum(len(v) for v in params.values())
         return self.inner.jacobian(self._merged(params), rows)[:, :k]  # type: ignore[attr-defined]
+
+    def _baseline_columns(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> object:
+        return self.inner.baseline_columns(self._merged(params), rows)  # type: ignore[attr-defined]
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         return self.inner.split(rng)
