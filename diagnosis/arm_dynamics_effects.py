@@ -114,8 +114,10 @@ EFFECTS: tuple[Effect, ...] = (
            tuple(f"link{j}" for j in J), ("1",) * 7, np.zeros(7), np.full(7, -0.9), np.full(7, 2.0)),
     Effect("torque_sensor", "torque sensor gain error (relative, per joint)",
            tuple(f"gain{j}" for j in J), ("1",) * 7, np.zeros(7), np.full(7, -0.5), np.full(7, 0.5)),
+    # a command cannot act before it is sent: 0 is a physical limit, and a fit that would go
+    # below it says "no latency here", not an admissible finding
     Effect("latency", "actuation latency (command reaches the joint late)", ("delay",), ("s",),
-           np.zeros(1), np.array([-0.005]), np.array([0.03])),
+           np.zeros(1), np.zeros(1), np.array([0.03]), physical_lower=True),
     Effect("sensor_timing", "torque sensors sampled out of step with the encoders (lag)",
            ("lag",), ("s",), np.zeros(1), np.array([-0.005]), np.array([0.005])),
     Effect("encoder_offset", "joint encoder offsets (measured minus true angle)",
