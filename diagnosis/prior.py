@@ -25,6 +25,10 @@ from serpar.sim.model_file import DiagnosisModel
 Vec = NDArray[np.float64]
 
 
+PASSED_THROUGH = ("folds", "noise_ratio", "channels", "empirical_library", "in_units")
+"""Optional Family hooks a prior leaves as the inner family has them."""
+
+
 def _fixed_values(model: DiagnosisModel, effect: Effect) -> tuple[Vec, Vec]:
     """The prior's values and std of ``effect``, in the family's parameter order. A parameter
     the prior lacks is at its nominal 0; one the family lacks must be 0 in the prior."""
@@ -70,6 +74,11 @@ class PriorFamily:
             self.jacobian = self._jacobian
         if callable(getattr(inner, "baseline_columns", None)):
             self.baseline_columns = self._baseline_columns
+        # the inner family's optional hooks do not depend on the parameters: its own folds (an
+        # episode deals its chamfer slides to them), noise estimate, channels and library
+        for hook in PASSED_THROUGH:
+            if hasattr(inner, hook):
+                setattr(self, hook, getattr(inner, hook))
 
     @property
     def max_effects(self) -> int:

@@ -133,6 +133,27 @@ def test_against_the_cell_config_the_friction_is_no_longer_missing(episodes, tmp
     assert diag.heldout_rms_before < 0.15 * blind.heldout_rms_before
 
 
+def test_against_a_model_the_episode_keeps_its_folds_and_noise_estimate(episodes, tmp_path
+                                                                        ) -> None:
+    """A prior changes the nominal prediction, not how the recording is resampled or its noise
+    estimated: the chamfer slides are dealt to every fold as the episode deals them (without
+    the episode's folds they would sit in one contiguous fold) and the residual check can
+    tell noise from structure."""
+    _, family, _ = episodes["contact"]
+    cell = tmp_path / "cell.yaml"
+    cell.write_text("arm_friction: 0.3\n")
+    prior = PriorFamily(family, model_from_episode_config(cell))
+    for (a, b), (c, d) in zip(prior.folds(5), family.folds(5), strict=True):
+        np.testing.assert_array_equal(a, c)
+        np.testing.assert_array_equal(b, d)
+    slides = family.n_arm + np.arange(family.slides.n)
+    assert all(np.isin(slides, held).any() for _, held in prior.folds(min(5, family.slides.n)))
+    rows = np.arange(family.n_samples)
+    white = np.random.default_rng(0).normal(size=14 * family.n_arm + family.slides.n)
+    ratio, _ = prior.noise_ratio(rows, white)
+    assert 0.9 < ratio < 1.1
+
+
 def test_episode_config_as_a_model(tmp_path) -> None:
     cell = tmp_path / "cell.yaml"
     cell.write_text("arm_friction: 0.5\n")
