@@ -33,9 +33,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_payload import (
+    PayloadRegressor,
+    link_rate,
     payload_inertial,
-    payload_model,
-    set_payload,
     standard_parameters,
 )
 from serpar.diagnosis.arm_dynamics_terms import Terms
@@ -155,10 +155,12 @@ class EffectModels:
         self.inertia_link, self.inertia_drive = self._per_link()
         self.base_link = dynamics.link_torque(terms.q_link, terms.dq_link, terms.ddq_link)
         self.base_drive = dynamics.link_torque(terms.q, terms.dq, terms.ddq)
-        self.payload_link, self.payload_drive = self._payload_regressor()
+        payload = PayloadRegressor.of(terms)
+        self.payload_link, self.payload_drive = payload.link, payload.drive
+        self.payload_mass, self.payload_link_rate = payload.mass, payload.link_rate
         # sensor timing: a link torque read `lag` late is the model's, minus lag x its rate
         full = dynamics.link_torque(terms.q_full, terms.dq_full, terms.a_full)
-        self.link_rate = terms.rows.link_at(np.gradient(full, axis=0) * terms.rate)
+        self.link_rate = link_rate(terms, full)
         self._offset_cols = np.array(OFFSET_JOINTS) - 1
         self._scale_cols = np.array(SCALE_JOINTS) - 1
 
@@ -177,7 +179,7 @@ class EffectModels:
                 tau = self.dyn.link_torque(t.q_full, t.dq_full, t.a_full)
                 link.append(t.rows.link_at(tau))
                 drive.append(t.rows.at(tau))
-                rate.append(t.rows.link_at(np.gradient(tau, axis=0) * t.rate))
+                rate.append(link_rate(t, tau))
                 inert.append(self.dyn.mass_link_and_full(t.q)[0])
         finally:
             model.body_mass[:], model.body_inertia[:] = mass, inertia
@@ -262,30 +264,6 @@ class EffectModels:
         if "link_inertia" in params:
             rate = rate + self.inertia_link_rate[rows] @ params["link_inertia"]
         return rate
-
-    def _payload_regressor(self) -> tuple[Vec, Vec]:
-        """rows x joint x 10: torque per standard inertial parameter of a rigid payload on
-        link 7 (mass, first moments, inertia about the link-7 origin), windowed like the
-        channels. Inverse dynamics is linear in these, so torques of 10 payload bodies with
-        independent parameter vectors, evaluated at every sample, give the regressor."""
-        dyn, body = payload_model()
-        model, t = dyn.model, self.terms
-        rng = np.random.default_rng(0)
-        phis, link, drive, mass, rate = [], [], [], [], []
-        for _ in range(10):
-            p = np.r_[rng.uniform(0.5, 2.0), rng.uniform(-0.1, 0.1, 3), rng.uniform(0.0, 0.01, 6)]
-            p[4:7] += 0.02  # diagonal-dominant: a positive-definite tensor
-            set_payload(model, body, p)
-            phis.append(standard_parameters(p))
-            tau = dyn.link_torque(t.q_full, t.dq_full, t.a_full)
-            link.append(t.rows.link_at(tau))
-            drive.append(t.rows.at(tau))
-            rate.append(t.rows.link_at(np.gradient(tau, axis=0) * t.rate))
-            mass.append(dyn.mass_link_and_full(t.q)[0])
-        inv = np.linalg.inv(np.array(phis).T)  # columns: the bodies' parameter vectors
-        self.payload_mass = np.stack(mass, axis=3) @ inv  # rows x 7 x 7 x 10
-        self.payload_link_rate = np.stack(rate, axis=2) @ inv
-        return np.stack(link, axis=2) @ inv, np.stack(drive, axis=2) @ inv
 
     def _true_state_torque(self, rows: NDArray[np.int64], sensor: bool, offset: Vec | None = None,
                            scale: Vec | None = None) -> Vec:

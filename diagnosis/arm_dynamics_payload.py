@@ -4,12 +4,18 @@ whose inverse dynamics builds the payload candidate's regressor (arm_dynamics_ef
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
 from serpar.sim.plants.arm_changes import inertia_from_extent
 from serpar.sim.rigid_arm import FLANGE_BODY, FLANGE_Z, ArmDynamics, rigid_arm_spec
+
+if TYPE_CHECKING:  # arm_dynamics_terms imports this module (load_torque)
+    from serpar.diagnosis.arm_dynamics_terms import Terms
 
 Vec = NDArray[np.float64]
 
@@ -73,3 +79,43 @@ def payload_model() -> tuple[ArmDynamics, int]:
     model.body_mass[:] = 0.0
     model.body_inertia[:] = 0.0
     return ArmDynamics(model), b
+
+
+def link_rate(terms: Terms, tau: Vec) -> Vec:
+    """The rate of a torque at every sample, windowed like the link-side sensor channel (what a
+    sensor reading late misses: lag x this)."""
+    return terms.rows.link_at(np.gradient(tau, axis=0) * terms.rate)
+
+
+@dataclass(frozen=True)
+class PayloadRegressor:
+    """Per row, the torque per standard inertial parameter of a rigid payload on link 7 (mass,
+    first moments, inertia about the link-7 origin: :func:`standard_parameters`), windowed like
+    the channels: rows x joint x 10 for the link channel, the drive channel and the link
+    channel's rate; rows x 7 x 7 x 10 for the joint-space inertia it adds."""
+
+    link: Vec
+    drive: Vec
+    link_rate: Vec
+    mass: Vec
+
+    @classmethod
+    def of(cls, terms: Terms) -> PayloadRegressor:
+        """Inverse dynamics is linear in the standard parameters, so the torques of 10 payload
+        bodies with independent parameter vectors, evaluated at every sample, give it."""
+        dyn, body = payload_model()
+        rng = np.random.default_rng(0)
+        phis, link, drive, rate, mass = [], [], [], [], []
+        for _ in range(10):
+            p = np.r_[rng.uniform(0.5, 2.0), rng.uniform(-0.1, 0.1, 3), rng.uniform(0.0, 0.01, 6)]
+            p[4:7] += 0.02  # diagonal-dominant: a positive-definite tensor
+            set_payload(dyn.model, body, p)
+            phis.append(standard_parameters(p))
+            tau = dyn.link_torque(terms.q_full, terms.dq_full, terms.a_full)
+            link.append(terms.rows.link_at(tau))
+            drive.append(terms.rows.at(tau))
+            rate.append(link_rate(terms, tau))
+            mass.append(dyn.mass_link_and_full(terms.q)[0])
+        inv = np.linalg.inv(np.array(phis).T)  # columns: the bodies' parameter vectors
+        return cls(np.stack(link, axis=2) @ inv, np.stack(drive, axis=2) @ inv,
+                   np.stack(rate, axis=2) @ inv, np.stack(mass, axis=3) @ inv)

@@ -15,6 +15,7 @@ from collections.abc import Mapping
 from dataclasses import replace
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from serpar.diagnosis.family import Effect, Family, LocateRow
@@ -111,7 +112,8 @@ class PriorFamily:
         k = sum(len(v) for v in params.values())
         return self.inner.jacobian(self._merged(params), rows)[:, :k]  # type: ignore[attr-defined]
 
-    def _baseline_columns(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> object:
+    def _baseline_columns(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
+                          ) -> sp.csr_matrix:
         return self.inner.baseline_columns(self._merged(params), rows)  # type: ignore[attr-defined]
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:

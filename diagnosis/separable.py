@@ -49,12 +49,13 @@ class SeparableFamily(Protocol):
     def baseline_columns(self, params: Mapping[str, Vec], rows: Rows) -> sp.csr_matrix: ...
 
 
-def _solver(b: sp.csr_matrix) -> tuple[sp.csc_matrix, object]:
+def _solver(b: sp.csr_matrix) -> spla.SuperLU:
+    """The factorised normal matrix of ``b``, with the ridge."""
     normal = (b.T @ b).tocsc()
     diag = normal.diagonal()
     scale = float(diag.max()) if diag.size and diag.max() > 0 else 1.0
     normal = normal + sp.identity(normal.shape[0], format="csc") * (RIDGE * scale)
-    return normal, spla.splu(normal)
+    return spla.splu(normal)
 
 
 def profile(family: SeparableFamily, params: Mapping[str, Vec], name: str, lower: Vec,
@@ -69,8 +70,7 @@ def profile(family: SeparableFamily, params: Mapping[str, Vec], name: str, lower
         b = family.baseline_columns(current, rows)
         if b.nnz == 0:
             break
-        _, lu = _solver(b)
-        step = -lu.solve(np.asarray(b.T @ r).ravel())  # type: ignore[attr-defined]
+        step = -_solver(b).solve(np.asarray(b.T @ r).ravel())
         for _halving in range(30):
             trial_t = np.clip(t + step, lower, upper)
             trial = {**params, name: trial_t}
@@ -94,6 +94,5 @@ def projected(jac: Vec, n_base: int, b: sp.csr_matrix) -> Vec:
     rest = jac[:, n_base:]
     if b.nnz == 0 or rest.shape[1] == 0:
         return rest
-    _, lu = _solver(b)
-    coef = lu.solve(np.asarray(b.T @ rest))  # type: ignore[attr-defined]
+    coef = _solver(b).solve(np.asarray(b.T @ rest))
     return rest - b @ coef

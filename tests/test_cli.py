@@ -1,6 +1,7 @@
 """The command line: figures, images, and one-line errors with exit code 2."""
 
 import json
+import re
 import subprocess
 import sys
 
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from serpar.cli.entry import main
+from serpar.cli.entry import build_parser, main
 
 
 def run(*args: str) -> subprocess.CompletedProcess:
@@ -97,10 +98,6 @@ def test_render_state_rejects_unknown():
 def test_the_usage_line_names_every_command() -> None:
     """The command list in `serpar --help`'s usage is every registered command by its own name
     (a hand-written list had lost export-mjcf and sim2real); aliases are not in it."""
-    import re
-
-    from serpar.cli.entry import build_parser
-
     parser = build_parser()
     usage = parser.format_usage()
     listed = set(re.search(r"\{([^}]*)\}", usage).group(1).split(","))
