@@ -73,7 +73,9 @@ STICK_VELOCITY = 0.01
 """[rad/s] Below this a joint with dry friction may be stuck, and its Coulomb force is then
 anywhere in [-Fc, Fc] (whatever balances the drive): rows weigh such samples as an interval,
 not a value. Above it the twin's MuJoCo frictionloss is >= 99 % of Fc, and the encoder
-velocity (central difference, noise ~1e-3 rad/s) has a certain sign."""
+velocity (central difference, noise ~1e-3 rad/s) has a certain sign. The default of
+``ArmDynamicsConfig.stick_velocity``; a recording whose joints creep under force control sets
+its own (diagnosis/episode_family.py)."""
 STRIBECK_SPEEDS = np.geomspace(STICK_VELOCITY, 0.4, 20)
 """[rad/s] Grid of the Stribeck regressor; the search range of the Stribeck speed (a fall
 below the speed at which a joint may be stuck could not be seen)."""
@@ -134,13 +136,14 @@ EFFECTS: tuple[Effect, ...] = (
 class EffectModels:
     """Contributions of the candidate effects to (link, drive) at given rows, N m."""
 
-    def __init__(self, terms: Terms, dynamics: ArmDynamics) -> None:
+    def __init__(self, terms: Terms, dynamics: ArmDynamics,
+                 stick_velocity: float = STICK_VELOCITY) -> None:
         self.terms, self.dyn = terms, dynamics
         rows = terms.rows
         v = terms.dq_full
         # friction: Coulomb sign where the joint surely moves, the viscous velocity, and the
         # window's weight of possibly stuck samples, all windowed like the command
-        moving = np.abs(v) >= STICK_VELOCITY
+        moving = np.abs(v) >= stick_velocity
         self.coulomb = rows.at(np.sign(v) * moving)
         self.viscous = rows.at(v)
         self.stuck = rows.at((~moving).astype(float))

@@ -18,7 +18,13 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from serpar.diagnosis.arm_dynamics_effects import BASELINE, COMMAND_ONLY, EFFECTS, EffectModels
+from serpar.diagnosis.arm_dynamics_effects import (
+    BASELINE,
+    COMMAND_ONLY,
+    EFFECTS,
+    STICK_VELOCITY,
+    EffectModels,
+)
 from serpar.diagnosis.arm_dynamics_empirical import arm_library
 from serpar.diagnosis.arm_dynamics_jacobian import residual_jacobian, tare_columns
 from serpar.diagnosis.arm_dynamics_signals import SmoothingConfig, read_arm_series
@@ -62,8 +68,14 @@ class ArmDynamicsConfig:
     """None: one constant tare per torque sensor. A spacing [s]: each sensor's tare is a
     piecewise-linear function of time with knots this far apart (the baseline then has 7 values
     per knot), for recordings long enough that the sensor zero's random walk shows."""
+    stick_velocity: float = STICK_VELOCITY
+    """[rad/s] Below this speed a joint with dry friction may be stuck (its friction anywhere in
+    +-Fc): the rows weigh it as an interval."""
 
     def __post_init__(self) -> None:
+        if not 0.0 < self.stick_velocity < 1.0:
+            raise IdentificationError(f"ArmDynamicsConfig.stick_velocity={self.stick_velocity} "
+                                      "rad/s must be in (0, 1)")
         if not self.block_s > 0:
             raise IdentificationError(f"ArmDynamicsConfig.block_s={self.block_s} must be > 0")
         if self.tare_knot_s is not None and not self.tare_knot_s > 0:
@@ -93,7 +105,7 @@ class ArmDynamicsFamily:
              f"is compared, and {', '.join(COMMAND_ONLY)} (which only the command shows: "
              "friction inside the drive acts before the torque sensor) are not candidates"),)
         self.n_samples = len(terms.time)
-        self._models = EffectModels(terms, dynamics)
+        self._models = EffectModels(terms, dynamics, cfg.stick_velocity)
         self._phases = phases
         self._regimes = self._regime_masks()
 

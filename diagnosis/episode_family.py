@@ -57,6 +57,12 @@ TARE_KNOT_S = 2.0
 sensor zeros walk (the cell's sensor model: 0.002 N m/sqrt(s), i.e. ~0.006 N m in 10 s, about
 twice a wrist joint's 1 ms-window noise); between knots 2 s apart the walk's bridge leaves
 ~0.001 N m. One knot per split block, so every knot is pinned by a training block."""
+STICK_VELOCITY = 0.05
+"""[rad/s] An episode's stick band, wider than a free-motion recording's 0.01: under the
+hand's force control and while it settles the joints creep at 0.01-0.05 rad/s, and there the
+nominal cell's drives deliver less than the Coulomb level a 0.01 band would hold them to
+(its 12-hole held-out residual against itself: 1.34x the noise with 0.01, 1.00x with 0.05;
+docs/sim2real.md)."""
 MAX_EFFECTS = 6
 """More than the engine's default 3: an episode holds the arm's dynamics (friction and its
 Stribeck fall, the held part's mass, the cell's sensor timing and latency) and its insertions'
@@ -183,6 +189,13 @@ class EpisodeFamily:
         r = consecutive_noise_ratio(self.keep[arm], np.asarray(whitened)[:14 * arm.size], 14)
         return None if r is None else (r, "sample-to-sample differences of the arm channels")
 
+    def residual_parts(self, rows: NDArray[np.int64], whitened: Vec) -> dict[str, Vec]:
+        """The arm channels' and the chamfer slides' residual entries: independent parts, each
+        tested against noise on its own (three slides beside 10^5 arm entries move no total)."""
+        arm, _ = self._parts(rows)
+        w = np.asarray(whitened, float)
+        return {"arm": w[:14 * arm.size], "chamfer slides": w[14 * arm.size:]}
+
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         t = self.inner.terms.time[self.keep]
         # blocks counted from the recording's first row, as the tare's knots are
@@ -232,6 +245,7 @@ def free_windows(rec: Recording, inner: ArmDynamicsFamily) -> tuple[NDArray[np.i
 
 def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None) -> EpisodeFamily:
     """The episode family of ``rec`` (IdentificationError names what the recording lacks)."""
-    inner = dynamics_family(rec, cfg or ArmDynamicsConfig(tare_knot_s=TARE_KNOT_S))
+    inner = dynamics_family(rec, cfg or ArmDynamicsConfig(tare_knot_s=TARE_KNOT_S,
+                                                        stick_velocity=STICK_VELOCITY))
     keep, excluded = free_windows(rec, inner)
     return EpisodeFamily(inner, keep, excluded, chamfer_slides(rec))

@@ -26,7 +26,8 @@ from serpar.sim.model_file import DiagnosisModel
 Vec = NDArray[np.float64]
 
 
-PASSED_THROUGH = ("folds", "noise_ratio", "channels", "empirical_library", "in_units")
+PASSED_THROUGH = ("folds", "noise_ratio", "channels", "empirical_library", "in_units",
+                  "residual_parts")
 """Optional Family hooks a prior leaves as the inner family has them."""
 
 

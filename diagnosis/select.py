@@ -11,7 +11,9 @@ parameters* when it lowers the information criterion on both splits:
 
 Of the candidates that earn, the one with the lowest held-out chi-square is added. Selection
 stops when none earns, or when the held-out residual has reached the noise floor (its
-chi-square test against unit-variance noise gives p >= ``alpha``). If the baseline alone is
+chi-square test against unit-variance noise gives p >= ``alpha``) in every independent part
+of the data the family names (``residual_parts``: an episode's chamfer slides are tested on
+their own, or their few rows would be drowned in the arm's thousands). If the baseline alone is
 at the noise floor on held-out data the answer is literally "no missing physics found
 beyond noise".
 """
@@ -81,6 +83,18 @@ def at_noise_floor(fit: Fit, alpha: float) -> bool:
     return float(scipy.stats.chi2.sf(fit.heldout_chi2, fit.n_heldout)) >= alpha
 
 
+def beyond_noise(family: Family, fit: Fit, heldout: np.ndarray, alpha: float) -> bool:
+    """Whether the held-out residual is beyond noise as a whole or in any of the family's
+    independent parts (optional hook ``residual_parts(rows, whitened) -> {name: entries}``)."""
+    if not at_noise_floor(fit, alpha):
+        return True
+    parts = getattr(family, "residual_parts", None)
+    if not callable(parts):
+        return False
+    whitened = family.residual(fit.params, heldout)
+    return any(chi2_p(part) < alpha for part in parts(heldout, whitened).values())
+
+
 def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
                    cfg: SelectConfig, report: Progress | None = None
                    ) -> tuple[list[Fit], list[CandidateScore], dict[str, Effect]]:
@@ -93,7 +107,7 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
     scores: list[CandidateScore] = []
     fixed: dict[str, Effect] = {}
     step = 0
-    while step < cfg.max_effects and not at_noise_floor(path[-1], cfg.alpha):
+    while step < cfg.max_effects and beyond_noise(family, path[-1], heldout, cfg.alpha):
         step += 1
         current = path[-1]
         best: tuple[Fit, dict[str, Effect]] | None = None

@@ -144,9 +144,10 @@ def _write_changes(root: ET.Element, nominal: mujoco.MjSpec, plant: mujoco.MjSpe
             el.set("interp", INTERP_NAMES[int(sensor.interp)])
     for act in plant.actuators:
         old, el = nominal.actuator(act.name), found["actuator", act.name]
-        if act.delay != old.delay or act.nsample != old.nsample:
+        if (act.delay, act.nsample, act.interp) != (old.delay, old.nsample, old.interp):
             el.set("delay", _number(act.delay))
             el.set("nsample", str(int(act.nsample)))
+            el.set("interp", INTERP_NAMES[int(act.interp)])
 
 
 def _source_tree() -> ET.Element:

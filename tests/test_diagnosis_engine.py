@@ -114,3 +114,51 @@ def test_locate_row_flags_only_beyond_noise() -> None:
                         ("b", "g", "bias", rng.normal(size=500) + 1.0)])
     assert [r.flagged for r in rows] == [False, True]
     assert isinstance(rows[0], LocateRow) and rows[0].as_dict()["n"] == 500
+
+
+class LineWithProbes(Line):
+    """A long line at its noise floor and six probe rows offset by ``PROBE`` (3 sigma), which
+    only the ``probe`` effect explains: a small independent part of the data (an episode's
+    chamfer slides beside its arm rows)."""
+
+    PROBE = 0.03
+
+    def __init__(self, parts: bool) -> None:
+        super().__init__({}, seed=3, n=3000)
+        self.n_line, self.n_samples = self.n_samples, self.n_samples + 6
+        self.effects = self.effects + (Effect("probe", "probe offset", ("d",), ("m",),
+                                              np.zeros(1), np.full(1, -1.0), np.full(1, 1.0)),)
+        self.probe_noise = np.random.default_rng(4).normal(size=6) * SIGMA
+        if parts:
+            self.residual_parts = lambda rows, w: {"line": w[rows < self.n_line],
+                                                   "probes": w[rows >= self.n_line]}
+
+    def residual(self, params, rows):
+        rows = np.asarray(rows)
+        line, probe = rows[rows < self.n_line], rows[rows >= self.n_line] - self.n_line
+        d = params["probe"][0] if "probe" in params else 0.0
+        probes = (d - self.PROBE - self.probe_noise[probe]) / SIGMA
+        return np.r_[super().residual({k: v for k, v in params.items() if k != "probe"}, line),
+                     probes]
+
+    def split(self, rng):
+        cut = 2 * self.n_line // 3
+        train, held = np.arange(cut), np.arange(cut, self.n_line)
+        k = self.n_line + np.arange(6)
+        return np.r_[train, k[::2]], np.r_[held, k[1::2]]
+
+    def locate(self, rows, whitened):
+        rows = np.asarray(rows)
+        return locate_rows([("y", "time", "line", whitened[rows < self.n_line]),
+                            ("probe", "row", "probes", whitened[rows >= self.n_line])])
+
+
+def test_a_small_part_beyond_noise_keeps_selection_going() -> None:
+    """The whole held-out residual is at its noise floor (three 3-sigma rows among a thousand),
+    but the probes alone are not: selection goes on for them only where the family names them
+    as a part of their own."""
+    assert "probe" not in {f.effect for f in diagnose(LineWithProbes(parts=False)).findings}
+    d = diagnose(LineWithProbes(parts=True))
+    assert [f.effect for f in d.findings] == ["probe"]
+    (p,) = d.findings[0].params
+    assert abs(p.value - LineWithProbes.PROBE) < 3 * p.std

@@ -66,6 +66,7 @@ def test_every_effect_round_trips_exactly_and_loads_from_any_directory(tmp_path)
     np.testing.assert_array_equal(m.dof_frictionloss[:7], fc)  # bit for bit, not 6 digits
     assert m.body(PAYLOAD_BODY).mass[0] == 0.3141592653589793
     assert m.actuator_delay[0] == 0.0012345678901 and m.opt.timestep == 1e-4
+    assert m.actuator_history[0, 1] == 1  # read linearly: a continuous delay, not the step's
     assert m.sensor_delay[m.sensor("tau_J3").id] == 0.00087654321
     text = out.path.read_text()
     assert text.count("serpar diagnose: joint_friction: Fc") == len(JOINT_NAMES)

@@ -40,7 +40,8 @@ MAX_LENGTH_ERROR = 0.05  # [m]
 MAX_REF = 0.2  # [rad] the diagnosis' own bound on an encoder offset
 MAX_DELAY = 0.1  # [s]
 INTERP_LINEAR = 1
-"""MJCF ``interp="linear"`` of a sensor history (MuJoCo 4's Python bindings give no enum)."""
+"""MJCF ``interp="linear"`` of a sensor or actuator history (MuJoCo 4's Python bindings give no
+enum)."""
 
 
 def _floats(name: str, values: tuple[float, ...], lo: float, hi: float) -> None:
@@ -248,6 +249,11 @@ def apply_arm_plant(spec: mujoco.MjSpec, changes: ArmPlantChanges, timestep: flo
             act.delay = changes.actuation_delay
             # the history must reach back past the delay: one sample per physics step
             act.nsample = history_samples(changes.actuation_delay, timestep)
+            # zero-order hold would apply a 1 kHz command from the first physics step at or
+            # after tick + delay (0.5436 ms acts as 0.6 ms at a 0.1 ms step); read linearly, the
+            # one step that straddles tick + delay carries the new command for exactly the
+            # fraction of it after that instant, so every tick's impulse is a continuous delay's
+            act.interp = INTERP_LINEAR
     if changes.torque_sensor_delay > 0:
         for name in TORQUE_SENSOR_NAMES:
             sensor = spec.sensor(name)
