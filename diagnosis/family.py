@@ -10,7 +10,10 @@ series, Stewart legs, episodes) is diagnosed by the same staged functions.
 Optional hook: a family whose domain has a model file of its own (the Stewart parameters
 that ``serpar run`` reads) may define ``export(params, stem) -> list[Path]``, writing the
 final fit's parameters (block name -> values) to files named ``<stem>.<what>``; see
-:func:`export_model_files`. Families without it are untouched.
+:func:`export_model_files`. Families without it are untouched. Likewise
+``residual_parts(rows, whitened) -> {name: entries}``: independent parts of the data (an
+episode's arm channels and its chamfer slides) that selection tests against noise one by one
+(:func:`serpar.diagnosis.select.beyond_noise`).
 """
 
 from __future__ import annotations
