@@ -58,11 +58,11 @@ sensor zeros walk (the cell's sensor model: 0.002 N m/sqrt(s), i.e. ~0.006 N m i
 twice a wrist joint's 1 ms-window noise); between knots 2 s apart the walk's bridge leaves
 ~0.001 N m. One knot per split block, so every knot is pinned by a training block."""
 STICK_VELOCITY = 0.05
-"""[rad/s] An episode's stick band, wider than a free-motion recording's 0.01: under the
-hand's force control and while it settles the joints creep at 0.01-0.05 rad/s, and there the
-nominal cell's drives deliver less than the Coulomb level a 0.01 band would hold them to
-(its 12-hole held-out residual against itself: 1.34x the noise with 0.01, 1.00x with 0.05;
-docs/sim2real.md)."""
+"""[rad/s] An episode's stick band, wider than a free-motion recording's 0.01: the cell's
+joints start and stop at 0.01-0.05 rad/s, where its MuJoCo frictionloss (a soft constraint,
+20 ms time constant) pushes along the motion of a decelerating joint instead of acting as
+Coulomb friction (the nominal 12-hole cell against itself: 1.34x the noise with 0.01, 1.00x
+with 0.05; docs/sim2real.md). A simulator artifact the band covers, not a drive's physics."""
 MAX_EFFECTS = 6
 """More than the engine's default 3: an episode holds the arm's dynamics (friction and its
 Stribeck fall, the held part's mass, the cell's sensor timing and latency) and its insertions'
