@@ -137,12 +137,17 @@ def chamfer_slides(rec: Recording) -> ChamferSlides:
         direction = f[seg, :2].mean(axis=0)
         direction /= np.linalg.norm(direction)
         lateral, axial = f[seg, :2] @ direction, f[seg, 2]
-        # the mean of a correlated series: variance sigma^2 * 2 tau / T
-        def sigma_mean(x: Vec) -> float:
-            return float(x.std() * np.sqrt(min(1.0, 2 * _correlation_time(x, dt) / (seg.size * dt))))
+        span = seg.size * dt
         rows.append((t[seg[0]], lateral.mean(), axial.mean(),
-                     sigma_mean(f[pre, :2] @ direction), sigma_mean(f[pre, 2]), seg.size))
+                     _sigma_mean(f[pre, :2] @ direction, dt, span),
+                     _sigma_mean(f[pre, 2], dt, span), seg.size))
     return _slides(rows, not_used)
+
+
+def _sigma_mean(x: Vec, dt: float, span: float) -> float:
+    """Sigma of the mean over ``span`` seconds of a series with ``x``'s scatter and correlation
+    time: variance sigma^2 * 2 tau / T (at most sigma^2)."""
+    return float(x.std() * np.sqrt(min(1.0, 2 * _correlation_time(x, dt) / span)))
 
 
 def _slides(rows: list[tuple[float, float, float, float, float, int]],

@@ -64,6 +64,14 @@ class PhysicsConfig:
     1e-4 the still platform froze 4.3-4.8 um short of a 2 mm move; at 1e-6 it stops within
     0.05 um. Not lower: seated journals chatter in their bores at 2-8e-7 m/s and would never
     sleep (measured at 1e-7). Tray parts fall asleep within 0.1 s either way."""
+    arm_friction_timeconst: float = 0.02
+    """solref time constant of the arm joints' dry friction rows (``frictionloss``) [s]; 0.02 is
+    MuJoCo's default. A friction row is soft: it pulls the joint's acceleration toward -v/tau,
+    so a joint other torques decelerate faster than that gets its dry friction pushed *along*
+    its motion near a stop (measured in the cell: joint 4 at 0.05 rad/s and 6 rad/s^2, the full
+    Fc reversed within 2 ms), which Coulomb friction never does. 5e-4 (twice the transit step)
+    keeps it Coulomb down to ~1e-3 rad/s (tests/test_dry_friction.py); every episode figure in
+    the docs was measured with 0.02."""
     noslip_iterations: int = 10
     """MuJoCo's no-slip post-solve on friction: without it a soft friction constraint creeps,
     and a held part whose tip lands on the plate top rocks in the soft pads, spins up and
@@ -77,6 +85,11 @@ class PhysicsConfig:
         if self.precision_timeconst is not None and self.precision_timeconst < 2 * self.timestep:
             raise ConfigError(f"precision_timeconst {self.precision_timeconst} s below 2*timestep "
                               f"({2 * self.timestep} s): MuJoCo would clamp it")
+        finest = max(self.timestep, self.transit_timestep or 0.0)
+        if not 2 * finest * (1 - 1e-9) <= self.arm_friction_timeconst <= 1.0:
+            raise ConfigError(f"arm_friction_timeconst {self.arm_friction_timeconst} s: valid "
+                              f"{2 * finest:g}..1 s (at least twice the largest physics step, "
+                              "or MuJoCo clamps it)")
         if not 0 <= self.noslip_iterations <= 1000:
             raise ConfigError(f"noslip_iterations {self.noslip_iterations}: valid 0..1000 (0 = off)")
         if not 2.0 <= self.grip_timesteps <= 200.0:

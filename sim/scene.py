@@ -135,6 +135,8 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
         arm.joint(joint).frictionloss = friction
     if cfg.arm_plant is not None:  # after the nominal friction: a diagnosed one replaces it
         apply_arm_plant(arm, cfg.arm_plant, cfg.physics.timestep)
+    for joint in JOINT_NAMES:  # whichever dry friction the joints have, its rows' stiffness
+        arm.joint(joint).solref_friction = [cfg.physics.arm_friction_timeconst, 1.0]
     spec.attach(arm, prefix=names.ARM, frame=world.add_frame(pos=[0, 0, 0]))
     for pad in PAD_GEOMS:
         spec.geom(names.ARM + pad).solref = list(cfg.physics.grip_solref)
