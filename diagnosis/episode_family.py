@@ -57,7 +57,7 @@ TARE_KNOT_S = 2.0
 sensor zeros walk (the cell's sensor model: 0.002 N m/sqrt(s), i.e. ~0.006 N m in 10 s, about
 twice a wrist joint's 1 ms-window noise); between knots 2 s apart the walk's bridge leaves
 ~0.001 N m. One knot per split block, so every knot is pinned by a training block."""
-STICK_VELOCITY = 0.05
+EPISODE_STICK_VELOCITY = 0.05
 """[rad/s] An episode's stick band, wider than a free-motion recording's 0.01: the cell's
 joints start and stop at 0.01-0.05 rad/s, where its MuJoCo frictionloss (a soft constraint,
 20 ms time constant) pushes along the motion of a decelerating joint instead of acting as
@@ -183,18 +183,25 @@ class EpisodeFamily:
                         None if v.measured is None
                         else np.r_[v.measured, self.slides.lateral[slide]])
 
+    def _split_whitened(self, rows: NDArray[np.int64], whitened: Vec
+                        ) -> tuple[NDArray[np.int64], Vec, Vec]:
+        """The arm rows (indices into ``keep``), their residual entries (14 each, first) and the
+        chamfer slides' entries (one each, after them)."""
+        arm, _ = self._parts(rows)
+        w = np.asarray(whitened, float)
+        return arm, w[:14 * arm.size], w[14 * arm.size:]
+
     def noise_ratio(self, rows: NDArray[np.int64], whitened: Vec) -> tuple[float, str] | None:
         """The arm channels' noise over the stated sigma, from sample-to-sample differences."""
-        arm, _ = self._parts(rows)
-        r = consecutive_noise_ratio(self.keep[arm], np.asarray(whitened)[:14 * arm.size], 14)
+        arm, w_arm, _ = self._split_whitened(rows, whitened)
+        r = consecutive_noise_ratio(self.keep[arm], w_arm, 14)
         return None if r is None else (r, "sample-to-sample differences of the arm channels")
 
     def residual_parts(self, rows: NDArray[np.int64], whitened: Vec) -> dict[str, Vec]:
         """The arm channels' and the chamfer slides' residual entries: independent parts, each
         tested against noise on its own (three slides beside 10^5 arm entries move no total)."""
-        arm, _ = self._parts(rows)
-        w = np.asarray(whitened, float)
-        return {"arm": w[:14 * arm.size], "chamfer slides": w[14 * arm.size:]}
+        _, w_arm, w_slides = self._split_whitened(rows, whitened)
+        return {"arm": w_arm, "chamfer slides": w_slides}
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         t = self.inner.terms.time[self.keep]
@@ -214,12 +221,10 @@ class EpisodeFamily:
         return train, held
 
     def locate(self, rows: NDArray[np.int64], whitened: Vec) -> list[LocateRow]:
-        arm, slide = self._parts(rows)
-        w = np.asarray(whitened, float)
-        out = self.inner.locate(self.keep[arm], w[:14 * arm.size])
-        if slide.size:
-            out += locate_rows([("insertion force ratio", "phase", "chamfer slide",
-                                 w[14 * arm.size:])])
+        arm, w_arm, w_slides = self._split_whitened(rows, whitened)
+        out = self.inner.locate(self.keep[arm], w_arm)
+        if w_slides.size:
+            out += locate_rows([("insertion force ratio", "phase", "chamfer slide", w_slides)])
         return out
 
 
@@ -246,6 +251,6 @@ def free_windows(rec: Recording, inner: ArmDynamicsFamily) -> tuple[NDArray[np.i
 def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None) -> EpisodeFamily:
     """The episode family of ``rec`` (IdentificationError names what the recording lacks)."""
     inner = dynamics_family(rec, cfg or ArmDynamicsConfig(tare_knot_s=TARE_KNOT_S,
-                                                        stick_velocity=STICK_VELOCITY))
+                                                        stick_velocity=EPISODE_STICK_VELOCITY))
     keep, excluded = free_windows(rec, inner)
     return EpisodeFamily(inner, keep, excluded, chamfer_slides(rec))

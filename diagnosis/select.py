@@ -20,7 +20,6 @@ beyond noise".
 
 from __future__ import annotations
 
-import itertools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -32,20 +31,13 @@ from threadpoolctl import threadpool_limits
 from serpar.diagnosis.empirical import EmpiricalTerm, characterise
 from serpar.diagnosis.empirical_refit import model_refit, outweighed
 from serpar.diagnosis.family import Effect, Family
+from serpar.diagnosis.findings import excess, findings_of, shares, verdict
 from serpar.diagnosis.fit import Fit, blocks_of, earns, fit_model
 from serpar.diagnosis.locate import chi2_p
 from serpar.diagnosis.residual import ResidualCheck, check_residual
-from serpar.diagnosis.result import (
-    NO_MISSING_PHYSICS,
-    CandidateScore,
-    Diagnosis,
-    Finding,
-    ParamEstimate,
-)
+from serpar.diagnosis.result import CandidateScore, Diagnosis, ParamEstimate
 from serpar.diagnosis.stability import (
     N_FOLDS,
-    Assessment,
-    Rows,
     assess,
     block_of,
     combined_std,
@@ -134,11 +126,6 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
     return path, scores, fixed
 
 
-def _excess(fit: Fit) -> float:
-    """Held-out mean square above the noise floor (whitened noise has mean square 1)."""
-    return max(fit.heldout_chi2 / max(fit.n_heldout, 1) - 1.0, 0.0)
-
-
 def _estimates(family: Family, fit: Fit, name: str) -> tuple[ParamEstimate, ...]:
     block = next(b for b in blocks_of(family, fit.active) if b.name == name)
     return tuple(ParamEstimate(p, float(v), float(s), u) for p, v, s, u in
@@ -173,17 +160,17 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
         raise IdentificationError(f"{family.kind}: training and held-out rows overlap")
     path, scores, fixed = forward_select(family, train, heldout, cfg, report)
     base, final = path[0], path[-1]
-    shares = _shares(family, path, heldout)
+    effect_shares = shares(family, path, heldout)
     if report and splits and final.active:
         report(f"resampling {len(splits)} folds")
     # the model (and the file written from it) holds the established effects only
-    kept, assessed, fixed = assess(family, final, {n: s[1] for n, s in shares.items()}, splits,
+    kept, assessed, fixed = assess(family, final, {n: s[1] for n, s in effect_shares.items()}, splits,
                                    train, heldout, fixed)
-    findings = _findings(family, path, shares, assessed, fixed)
+    found = findings_of(family, path, effect_shares, assessed, fixed)
     every = np.concatenate([train, heldout])
     before = family.residual(base.params, heldout)
     after = family.residual(kept.params, heldout)
-    excess0 = _excess(base)
+    excess0 = excess(base)
     residual = check_residual(family, heldout, after, cfg.alpha)
     empirical = None
     library = getattr(family, "empirical_library", None)
@@ -203,8 +190,8 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
             # an established effect that only stood in for the physics the empirical term
             # describes is not a finding: demote it, refit the rest, characterise again
             why = "it no longer earns its parameters once the empirical term is in the model"
-            findings = [replace(f, established=False, reasons=f.reasons + (why,))
-                        if f.effect in stand_ins else f for f in findings]
+            found = [replace(f, established=False, reasons=f.reasons + (why,))
+                     if f.effect in stand_ins else f for f in found]
             kept, fixed = fit_identified(family, tuple(a for a in kept.active
                                                        if a not in stand_ins),
                                          train, heldout, kept.params, fixed)
@@ -215,7 +202,9 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
                                      train, heldout, splits, n_channels, every)
     if residual.structured is False and empirical is not None:
         residual, empirical = noise_like_but_explained(residual, empirical)
-    verdict = _verdict(findings, base, cfg, residual.words, empirical)
+    # quiet only if no part of the data is beyond noise: the rule selection stops by
+    quiet = not beyond_noise(family, base, heldout, cfg.alpha)
+    words = verdict(found, quiet, residual.words, empirical)
     baseline = (_estimates(family, kept, family.baseline.name)
                 if family.baseline is not None else ())
     model = {name: {"values": [float(v) for v in kept.params[name]],
@@ -223,9 +212,9 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
                         kept, name, assessed[name].resampled if name in assessed else None)],
                     "names": list(block_of(family, kept.active, name, fixed).param_names)}
              for name in kept.params}
-    explained = (excess0 - _excess(kept)) / excess0 if excess0 > 0 else 0.0
+    explained = (excess0 - excess(kept)) / excess0 if excess0 > 0 else 0.0
     return Diagnosis(
-        kind=family.kind, verdict=verdict, findings=tuple(findings), candidates=tuple(scores),
+        kind=family.kind, verdict=words, findings=tuple(found), candidates=tuple(scores),
         locate_before=tuple(family.locate(every, family.residual(base.params, every))),
         locate_after=tuple(family.locate(every, family.residual(kept.params, every))),
         baseline_params=baseline, n_train_rows=int(train.size),
@@ -255,72 +244,3 @@ def noise_like_but_explained(residual: ResidualCheck, empirical: EmpiricalTerm
              "is inflated by it, since an empirical term removes part of it on held-out data; "
              "physics that no candidate explains")
     return replace(residual, structured=True, words=words), empirical
-
-
-def _shares(family: Family, path: list[Fit], heldout: Rows) -> dict[str, tuple[float, float]]:
-    """Per selected effect: the share of the baseline's excess held-out residual it removed
-    when it was added, and the share of what the effects before it left on the held-out rows it
-    acts on (an effect on a few rows, the chamfer slides of an episode, is judged on those, not
-    on the arm's thousands)."""
-    excess0, out = _excess(path[0]), {}
-    for prev, fit in itertools.pairwise(path):
-        name = fit.active[-1]
-        removed = _excess(prev) - _excess(fit)
-        without = {k: v for k, v in fit.params.items() if k != name}
-        reach = (family.residual(fit.params, heldout) - family.residual(without, heldout)) != 0
-        before = family.residual(prev.params, heldout)[reach]
-        left = (float(before @ before) - before.size) / max(prev.n_heldout, 1)
-        out[name] = (float(np.clip(removed / excess0 if excess0 > 0 else 0.0, 0, 1)),
-                     float(np.clip(removed / left if left > 0 else 0.0, 0, 1)))
-    return out
-
-
-def _findings(family: Family, path: list[Fit], shares: dict[str, tuple[float, float]],
-              assessed: dict[str, Assessment], fixed: dict[str, Effect]) -> list[Finding]:
-    out = []
-    for rank, (prev, fit) in enumerate(itertools.pairwise(path), start=1):
-        name = fit.active[-1]
-        d_bic, d_held, _ = earns(prev, fit)
-        a = assessed[name]
-        effect = block_of(family, a.fit.active, name, fixed)
-        values = a.fit.params[name]
-        std = combined_std(a.fit, name, a.resampled)
-        # parameters and uncertainty from the model the effect was last judged in
-        estimates = tuple(ParamEstimate(p, float(v), float(s), u) for i, (p, v, s, u) in
-                          enumerate(zip(effect.param_names, values, std, effect.units))
-                          if i not in effect.fixed)
-        notes = []
-        if effect.excess_words and values[0] < 0:
-            notes.append(effect.excess_words.format(
-                value=f"{-values[0]:.3g} {effect.units[0]}".rstrip()))
-        if effect.fixed:
-            notes.append("not identified by these data, held at 0: "
-                         + ", ".join(effect.param_names[i] for i in effect.fixed))
-        out.append(Finding(rank, name, effect.summary, estimates, shares[name][0], d_bic, d_held,
-                           shares[name][1], established=not a.reasons, reasons=a.reasons,
-                           stability=None if a.resampled is None else a.resampled.frequency,
-                           note="; ".join(notes)))
-    return out
-
-
-def _verdict(findings: list[Finding], base: Fit, cfg: SelectConfig, residual_words: str,
-             empirical: EmpiricalTerm | None = None) -> str:
-    if not findings and at_noise_floor(base, cfg.alpha):
-        return NO_MISSING_PHYSICS
-    established = [f.summary for f in findings if f.established]
-    suspected = [f"{f.summary} ({'; '.join(f.reasons)})" for f in findings if not f.established]
-    if not findings:
-        head = "no candidate effect earns its parameters on held-out data"
-    elif established:
-        head = "missing physics: " + ", ".join(established)
-    else:
-        head = "no finding holds up"
-    if suspected:
-        head += "; suspected, not established: " + ", ".join(suspected)
-    tail = ""
-    if empirical is not None and empirical.terms:
-        tail = (". What is left, characterised as an empirical term (a hypothesis, not a "
-                f"finding): {empirical.words()}")
-    elif empirical is not None:
-        tail = f". Outside the library: {empirical.words()}"
-    return f"{head}. {residual_words[0].upper()}{residual_words[1:]}{tail}"

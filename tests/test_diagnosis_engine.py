@@ -162,3 +162,7 @@ def test_a_small_part_beyond_noise_keeps_selection_going() -> None:
     assert [f.effect for f in d.findings] == ["probe"]
     (p,) = d.findings[0].params
     assert abs(p.value - LineWithProbes.PROBE) < 3 * p.std
+    # with no candidate allowed, the probes beyond noise still keep "no missing physics" away
+    assert diagnose(LineWithProbes(parts=False), cfg=SelectConfig(max_effects=0)).no_missing_physics
+    unexplained = diagnose(LineWithProbes(parts=True), cfg=SelectConfig(max_effects=0))
+    assert not unexplained.no_missing_physics and "no candidate" in unexplained.verdict

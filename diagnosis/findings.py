@@ -1,0 +1,90 @@
+"""The report stage of a diagnosis: each selected effect's share of the residual, its finding
+(parameters, evidence, whether it held up) and the one-line verdict (diagnosis/select.py runs
+the stages)."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from serpar.diagnosis.empirical import EmpiricalTerm
+from serpar.diagnosis.family import Effect, Family
+from serpar.diagnosis.fit import Fit, earns
+from serpar.diagnosis.result import NO_MISSING_PHYSICS, Finding, ParamEstimate
+from serpar.diagnosis.stability import Assessment, Rows, block_of, combined_std
+
+
+def excess(fit: Fit) -> float:
+    """Held-out mean square above the noise floor (whitened noise has mean square 1)."""
+    return max(fit.heldout_chi2 / max(fit.n_heldout, 1) - 1.0, 0.0)
+
+
+def shares(family: Family, path: list[Fit], heldout: Rows) -> dict[str, tuple[float, float]]:
+    """Per selected effect: the share of the baseline's excess held-out residual it removed
+    when it was added, and the share of what the effects before it left on the held-out rows it
+    acts on (an effect on a few rows, the chamfer slides of an episode, is judged on those, not
+    on the arm's thousands)."""
+    excess0, out = excess(path[0]), {}
+    for prev, fit in itertools.pairwise(path):
+        name = fit.active[-1]
+        removed = excess(prev) - excess(fit)
+        without = {k: v for k, v in fit.params.items() if k != name}
+        reach = (family.residual(fit.params, heldout) - family.residual(without, heldout)) != 0
+        before = family.residual(prev.params, heldout)[reach]
+        left = (float(before @ before) - before.size) / max(prev.n_heldout, 1)
+        out[name] = (float(np.clip(removed / excess0 if excess0 > 0 else 0.0, 0, 1)),
+                     float(np.clip(removed / left if left > 0 else 0.0, 0, 1)))
+    return out
+
+
+def findings_of(family: Family, path: list[Fit], shares: dict[str, tuple[float, float]],
+              assessed: dict[str, Assessment], fixed: dict[str, Effect]) -> list[Finding]:
+    out = []
+    for rank, (prev, fit) in enumerate(itertools.pairwise(path), start=1):
+        name = fit.active[-1]
+        d_bic, d_held, _ = earns(prev, fit)
+        a = assessed[name]
+        effect = block_of(family, a.fit.active, name, fixed)
+        values = a.fit.params[name]
+        std = combined_std(a.fit, name, a.resampled)
+        # parameters and uncertainty from the model the effect was last judged in
+        estimates = tuple(ParamEstimate(p, float(v), float(s), u) for i, (p, v, s, u) in
+                          enumerate(zip(effect.param_names, values, std, effect.units))
+                          if i not in effect.fixed)
+        notes = []
+        if effect.excess_words and values[0] < 0:
+            notes.append(effect.excess_words.format(
+                value=f"{-values[0]:.3g} {effect.units[0]}".rstrip()))
+        if effect.fixed:
+            notes.append("not identified by these data, held at 0: "
+                         + ", ".join(effect.param_names[i] for i in effect.fixed))
+        out.append(Finding(rank, name, effect.summary, estimates, shares[name][0], d_bic, d_held,
+                           shares[name][1], established=not a.reasons, reasons=a.reasons,
+                           stability=None if a.resampled is None else a.resampled.frequency,
+                           note="; ".join(notes)))
+    return out
+
+
+def verdict(findings: list[Finding], baseline_quiet: bool, residual_words: str,
+            empirical: EmpiricalTerm | None = None) -> str:
+    """``baseline_quiet``: the baseline alone is at the noise floor in every part of the data."""
+    if not findings and baseline_quiet:
+        return NO_MISSING_PHYSICS
+    established = [f.summary for f in findings if f.established]
+    suspected = [f"{f.summary} ({'; '.join(f.reasons)})" for f in findings if not f.established]
+    if not findings:
+        head = "no candidate effect earns its parameters on held-out data"
+    elif established:
+        head = "missing physics: " + ", ".join(established)
+    else:
+        head = "no finding holds up"
+    if suspected:
+        head += "; suspected, not established: " + ", ".join(suspected)
+    tail = ""
+    if empirical is not None and empirical.terms:
+        tail = (". What is left, characterised as an empirical term (a hypothesis, not a "
+                f"finding): {empirical.words()}")
+    elif empirical is not None:
+        tail = f". Outside the library: {empirical.words()}"
+    return f"{head}. {residual_words[0].upper()}{residual_words[1:]}{tail}"
