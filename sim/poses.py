@@ -31,13 +31,22 @@ def solve_tcp_pose(scene: Scene, position: np.ndarray, approach: np.ndarray = DO
 
     Damped least squares within the joint limits (scipy); raises if the residual > 1 um.
     """
-    m, d = scene.model, scene.data
-    site = m.site(names.ARM + TCP_SITE).id
+    site = scene.model.site(names.ARM + TCP_SITE).id
+    return solve_site_pose(scene.model, scene.data.qpos, scene.arm_qpos_adr, site, position,
+                           approach, yaw_hint, rotation, q_start)
+
+
+def solve_site_pose(model: mujoco.MjModel, qpos: np.ndarray, arm_qpos_adr: np.ndarray, site: int,
+                    position: np.ndarray, approach: np.ndarray = DOWN, yaw_hint: float | None = None,
+                    rotation: np.ndarray | None = None, q_start: np.ndarray | None = None) -> np.ndarray:
+    """:func:`solve_tcp_pose` for any model holding the arm: `qpos` the state the other joints
+    keep, `arm_qpos_adr` the arm joints' addresses, `site` the TCP's id."""
+    m = model
     work = mujoco.MjData(m)
-    work.qpos[:] = d.qpos
+    work.qpos[:] = qpos
 
     def residual(q: np.ndarray) -> np.ndarray:
-        work.qpos[scene.arm_qpos_adr] = q
+        work.qpos[arm_qpos_adr] = q
         mujoco.mj_kinematics(m, work)
         rot = work.site_xmat[site].reshape(3, 3)
         if rotation is not None:
@@ -47,7 +56,7 @@ def solve_tcp_pose(scene: Scene, position: np.ndarray, approach: np.ndarray = DO
             res.append([0.01 * (np.arctan2(rot[1, 0], rot[0, 0]) - yaw_hint)])
         return np.concatenate(res)
 
-    q0 = d.qpos[scene.arm_qpos_adr].copy() if q_start is None else np.asarray(q_start, float)
+    q0 = np.asarray(qpos, float)[arm_qpos_adr].copy() if q_start is None else np.asarray(q_start, float)
     sol = least_squares(residual, q0, bounds=(np.array(Q_MIN), np.array(Q_MAX)), xtol=1e-14,
                         ftol=1e-14, gtol=1e-14)
     if np.linalg.norm(sol.fun[:3]) > 1e-6 or (rotation is not None and np.linalg.norm(sol.fun[3:]) > 1e-6):
