@@ -21,13 +21,14 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from serpar.checks.montecarlo_config import SOURCES, MonteCarloConfig, TrialSample, draw_trial
+from serpar.checks.tool_changer_robot import PAPER_POSITION_RELIABILITY
 from serpar.controllers.batch_sensors import trial_seeds
 from serpar.errors import ConfigError
 from serpar.sim.arm import HOME_Q, PANDA_COULOMB_FRICTION
 from serpar.sim.trial_scene import TrialIds, TrialSceneConfig, build_trial_spec
 from serpar.tasks.episode_config import EpisodeConfig, Outcome, wilson_interval
 from serpar.tasks.insertion import InsertionConfig
-from serpar.tasks.insertion_batch import TrialConfig, TrialResult, run_trials
+from serpar.tasks.insertion_batch import Trial, TrialConfig, TrialResult, run_trials
 from serpar.tasks.trial_start import TrialStart, plan_start
 
 BATCH = 256
@@ -76,6 +77,18 @@ class MonteCarloResult:
     @property
     def success_rate(self) -> float:
         return self.counts["success"] / len(self.rows) if self.rows else float("nan")
+
+    def seed001(self) -> dict[str, object] | None:
+        """With seed 001's positioning: P(seated) beside the pose reliability P(|dP| < d) of the
+        same sampled robots, and the paper's (its own robot's) figures."""
+        if self.config.positioning != "seed001" or not self.rows:
+            return None
+        err = np.array([r.sample.tool_error for r in self.rows])
+        return {"p_seated": self.success_rate,
+                "p_position_within_mm": {str(d): float((err < d * 1e-3).mean())
+                                         for d in PAPER_POSITION_RELIABILITY},
+                "paper_p_position_within_mm": {str(d): p for d, p in PAPER_POSITION_RELIABILITY.items()},
+                "median_position_error_mm": float(np.median(err) * 1e3)}
 
     @property
     def wilson95(self) -> tuple[float, float]:
@@ -134,8 +147,9 @@ def run_montecarlo(cfg: MonteCarloConfig, trials: int, seed: int, threads: int =
             # every trial's inverse kinematics from the same guess: the arm has one redundant
             # joint, so the elbow a solution lands on depends on where the search started
             models, starts, samples = prepare(cfg, seed, block, q_guess)
-            results = run_trials(models, starts, trial_seeds(seed, block), scene.chamfer, tcfg,
-                                 threads, on_period)
+            batch_trials = [Trial(m, st, sd, s.draw.hole_diameter) for m, st, sd, s in
+                            zip(models, starts, trial_seeds(seed, block), samples)]
+            results = run_trials(batch_trials, scene.chamfer, tcfg, threads, on_period)
             rows = [TrialRow(k, s, _tip_off_axis(st, scene) * 1e3, r)
                     for k, s, st, r in zip(block, samples, starts, results)]
             result.rows.extend(rows)
@@ -156,12 +170,13 @@ def write_parquet(result: MonteCarloResult, path: Path) -> None:
 def sensitivity(result: MonteCarloResult) -> dict[str, float | None]:
     """Per error source, how well its size alone tells failed trials from seated ones: the
     probability that a failed trial's draw of it is larger than a seated one's (AUC; 0.5 = no
-    bearing on the outcome, 1 = failures are exactly the large draws). None without both."""
+    bearing on the outcome, 1 = failures are exactly the large draws). None without both, or
+    for a source this budget leaves out."""
     ok = np.array([r.result.outcome is Outcome.SUCCESS for r in result.rows])
     out: dict[str, float | None] = {}
     for src in SOURCES:
         size = np.array([r.sample.magnitude[src] for r in result.rows])
-        if ok.all() or not ok.any():
+        if ok.all() or not ok.any() or np.ptp(size) == 0:
             out[src] = None
             continue
         fail, good = size[~ok], size[ok]

@@ -13,19 +13,28 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from serpar.checks.error_analysis import arm_model, perturbed_poses, transmission_errors
+from serpar.checks.tool_changer_robot import ErrorSample, sample_transmission
 from serpar.errors import ConfigError
 from serpar.sim.tolerances import BODY_H6, DISTRIBUTIONS, HOLE_H7, JOURNAL_H6
 from serpar.tasks.trial_start import TrialDraw
 
 SOURCES: tuple[str, ...] = ("clearance", "hole_vision", "hole_tilt", "platform", "inhand_tip",
-                            "inhand_tilt", "grasp_offset", "grasp_tilt")
+                            "inhand_tilt", "grasp_offset", "grasp_tilt", "tool_position", "tool_tilt")
 """The error sources a trial's draw is made of (the sensitivity table's rows)."""
+POSITIONING: tuple[str, ...] = ("vision", "seed001")
+"""Where the journal is brought to the hole from: 'vision' (the cell: steps 2 and 4 measure,
+the platform aligns; the error budget's fields) or 'seed001' (seed 001's error analysis: the
+Panda's joint and link errors of its Table 1, mapped through the arm's kinematics to the tool
+tip, no vision; the clearance and grasp errors stay)."""
 
 
 @dataclass(frozen=True)
 class MonteCarloConfig:
     """One error budget; every sigma is per lateral axis (a 2-D isotropic normal)."""
 
+    positioning: str = "vision"
+    """'vision' or 'seed001' (:data:`POSITIONING`)."""
     tolerance_distribution: str = "uniform"
     """Hole (H7), journal and body (h6) diameters within their bands: 'uniform' or 'normal'
     (3 sigma at the band edges, clipped)."""
@@ -54,6 +63,8 @@ class MonteCarloConfig:
     """The push F_d along the hole axis [N] (the episode's)."""
 
     def __post_init__(self) -> None:
+        if self.positioning not in POSITIONING:
+            raise ConfigError(f"positioning {self.positioning!r}; valid: {', '.join(POSITIONING)}")
         if self.tolerance_distribution not in DISTRIBUTIONS:
             raise ConfigError(f"tolerance_distribution {self.tolerance_distribution!r}; valid: "
                               f"{', '.join(DISTRIBUTIONS)}")
@@ -80,6 +91,8 @@ class TrialSample:
     tilt's angle [rad], the diametral clearance [m]."""
     tilt: float
     """Angle between the journal and hole axes at the start [rad]."""
+    tool_error: float = float("nan")
+    """'seed001' positioning: |dP| of the tool tip [m] (seed 001's reliability is P(|dP| < d))."""
 
 
 def _normal2(rng: np.random.Generator, sigma: float) -> tuple[float, float]:
@@ -101,6 +114,8 @@ def draw_trial(cfg: MonteCarloConfig, seed: int, trial: int) -> TrialSample:
     tilt = np.radians(np.array(_normal2(rng, cfg.inhand_tilt_sigma_deg)))
     grasp_offset = float(rng.normal(0.0, cfg.grasp_offset_sigma_mm * 1e-3))
     grasp_tilt = float(np.radians(rng.normal(0.0, cfg.grasp_tilt_sigma_deg)))
+    if cfg.positioning == "seed001":
+        return _seed001(rng, hole, journal, body, grasp_offset, grasp_tilt)
     # The hole's axis error tilts the hole; with the plate held level it is the journal's
     # axis error relative to the hole's, as the in-hand one is.
     vision_tilt = (float(tilt[0] + hole_tilt[0]), float(tilt[1] + hole_tilt[1]))
@@ -109,5 +124,32 @@ def draw_trial(cfg: MonteCarloConfig, seed: int, trial: int) -> TrialSample:
     magnitude = {"clearance": hole - journal, "hole_vision": float(np.hypot(*hole_vision)),
                  "hole_tilt": float(np.hypot(*hole_tilt)), "platform": float(np.hypot(*platform)),
                  "inhand_tip": float(np.hypot(*tip)), "inhand_tilt": float(np.hypot(*tilt)),
-                 "grasp_offset": abs(grasp_offset), "grasp_tilt": abs(grasp_tilt)}
+                 "grasp_offset": abs(grasp_offset), "grasp_tilt": abs(grasp_tilt),
+                 "tool_position": 0.0, "tool_tilt": 0.0}
     return TrialSample(draw, magnitude, float(np.hypot(*vision_tilt)))
+
+
+PANDA = arm_model("panda")
+PANDA_TABLE1 = transmission_errors(PANDA, "table1")
+NOMINAL_TOOL = perturbed_poses(PANDA, ErrorSample(
+    np.zeros((1, len(PANDA.lengths_m))), np.zeros((1, len(PANDA.q))), np.zeros((1, len(PANDA.q), 2)),
+    np.zeros((1, len(PANDA.q))), np.zeros((1, len(PANDA.q), 2))))[0]
+"""The Panda's tool pose at seed 001's working configuration without errors."""
+
+
+def _seed001(rng: np.random.Generator, hole: float, journal: float, body: float,
+             grasp_offset: float, grasp_tilt: float) -> TrialSample:
+    """One robot of seed 001's analysis: the Panda with Table 1's errors; the tool's position
+    error moves the journal off the hole, its orientation error tilts it (the guarded
+    approach finds the surface whatever the height error)."""
+    nominal = NOMINAL_TOOL
+    pose = perturbed_poses(PANDA, sample_transmission(PANDA, PANDA_TABLE1, 1, rng))[0]
+    dp = pose[:3, 3] - nominal[:3, 3]
+    rel = pose[:3, :3] @ nominal[:3, :3].T
+    tilt = np.array([rel[2, 1] - rel[1, 2], rel[0, 2] - rel[2, 0]]) / 2  # small-angle x, y
+    draw = TrialDraw(hole, journal, body, grasp_offset, grasp_tilt, (0.0, 0.0),
+                     (float(tilt[0]), float(tilt[1])), (float(-dp[0]), float(-dp[1])))
+    magnitude = {s: 0.0 for s in SOURCES} | {
+        "clearance": hole - journal, "grasp_offset": abs(grasp_offset), "grasp_tilt": abs(grasp_tilt),
+        "tool_position": float(np.hypot(dp[0], dp[1])), "tool_tilt": float(np.hypot(*tilt))}
+    return TrialSample(draw, magnitude, float(np.hypot(*tilt)), float(np.linalg.norm(dp)))

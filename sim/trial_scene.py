@@ -33,8 +33,9 @@ from serpar.sim.tolerances import BODY_H6, HOLE_H7, JOURNAL_H6
 
 STATION_ENTRY: tuple[float, float, float] = (0.60, 0.0, 0.299)
 """Where the platform brings each hole's entry in the cell [m] (tasks/episode_steps.py)."""
-PATCH = BaseplateConfig(rows=1, cols=1, margin=0.004)
-"""One hole's share of the plate: 18 mm square, the plate's thickness and bore."""
+PATCH = BaseplateConfig(rows=1, cols=1, margin=0.025)
+"""One hole in 60 mm square of plate (the plate's thickness and bore): a journal positioned
+mm off (seed 001's error budget) still lands on plate, as it would in the cell."""
 PART = 0
 """The trial's one conductor carries the cell's first conductor's names (``conductor0/``)."""
 

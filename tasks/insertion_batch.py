@@ -81,6 +81,9 @@ class _Slots:
     settle_s: float
     bore_start: float
     """Depth below the entry where the straight bore begins (the chamfer's foot) [m]."""
+    mouth_radius: Arr
+    """Each trial's hole radius at its entry (bore radius + chamfer) [m]: a tip ending farther off
+    the axis missed the hole (past the plate's edge, where a neighbour hole would be)."""
     phase: NDArray[np.int8] = field(init=False)
     t: Arr = field(init=False)
     t_phase: Arr = field(init=False)
@@ -109,15 +112,24 @@ def _in_hole_frame(xpos: Arr, xmat: Arr, site: int, hole: int) -> Arr:
     return np.einsum("nji,nj->ni", rot, xpos[:, site] - xpos[:, hole])
 
 
-def run_trials(models: Sequence[mujoco.MjModel], starts: Sequence[TrialStart], seeds: Sequence[Seed],
-               bore_start: float, cfg: TrialConfig = TrialConfig(), nthread: int = 1,
-               on_period: Callable[[int], None] | None = None) -> list[TrialResult]:
-    """Run one batch of trials to their ends; trial i on ``models[i]`` from ``starts[i]``
-    (:func:`serpar.tasks.trial_start.plan_start`), sensor noise stream ``seeds[i]``;
-    ``bore_start`` the chamfer's depth [m]. ``on_period(active)`` after every control period."""
-    n = len(models)
-    if not n == len(starts) == len(seeds):
-        raise ConfigError(f"{n} models, {len(starts)} starts and {len(seeds)} seeds: one each per trial")
+@dataclass(frozen=True, eq=False)
+class Trial:
+    """One trial: its scene (with its part diameters), start and sensor-noise stream."""
+
+    model: mujoco.MjModel
+    start: TrialStart
+    seed: Seed
+    hole_diameter: float
+
+
+def run_trials(trials: Sequence[Trial], chamfer: float, cfg: TrialConfig = TrialConfig(),
+               nthread: int = 1, on_period: Callable[[int], None] | None = None) -> list[TrialResult]:
+    """Run one batch of trials to their ends (their models must share one spec's sizes; the
+    bore's entry ``chamfer`` [m]); ``on_period(active)`` after every control period."""
+    n = len(trials)
+    if not n:
+        raise ConfigError("run_trials needs at least one trial")
+    models, starts, seeds = [t.model for t in trials], [t.start for t in trials], [t.seed for t in trials]
     model, ins = models[0], cfg.insertion
     ids, arm = TrialIds.of(model), ArmIndex.from_model(model, names.ARM)
     batch = mujoco.batch.Batch(model, n, nthread)
@@ -131,7 +143,7 @@ def run_trials(models: Sequence[mujoco.MjModel], starts: Sequence[TrialStart], s
     _place(batch, starts, ids, arm, model)
     grip = model.actuator(names.ARM + GRIP_ACTUATOR).id
     ctrl[:, grip] = cfg.squeeze_n
-    s = _Slots(n, cfg.settle_s, bore_start)
+    s = _Slots(n, cfg.settle_s, chamfer, np.array([t.hole_diameter / 2 + chamfer for t in trials]))
     rot = np.stack([st.rot for st in starts])
     axis = np.stack([st.axis for st in starts])
     goal = np.stack([st.seat for st in starts]) + ins.overtravel * axis
@@ -262,7 +274,8 @@ def _classify(batch: mujoco.batch.Batch, s: _Slots, ids: TrialIds, ins: Insertio
     batch.forward()
     xpos, xmat = batch.bind("site_xpos"), batch.bind("site_xmat")
     shoulder = _in_hole_frame(xpos, xmat, ids.shoulder_site, ids.hole_site)[:, 2]
-    tip_depth = -_in_hole_frame(xpos, xmat, ids.tip_site, ids.hole_site)[:, 2]
+    tip = _in_hole_frame(xpos, xmat, ids.tip_site, ids.hole_site)
+    tip_depth, tip_off = -tip[:, 2], np.hypot(tip[:, 0], tip[:, 1])
     out = []
     for i in range(s.n):
         t_ins = s.t[i] - s.t_contact[i] if np.isfinite(s.t_contact[i]) else float("nan")
@@ -275,7 +288,7 @@ def _classify(batch: mujoco.batch.Batch, s: _Slots, ids: TrialIds, ins: Insertio
             outcome, reason = Outcome.SUCCESS, "seated"
         elif s.timed_out[i]:
             outcome, reason = Outcome.TIMEOUT, f"not seated after {ins.time_limit_s:g} s"
-        elif tip_depth[i] <= s.bore_start:
+        elif tip_depth[i] <= s.bore_start or tip_off[i] > s.mouth_radius:
             outcome, reason = Outcome.ALIGN_FAIL, f"tip on the rim or chamfer, {lateral:.3f} mm off axis"
         else:
             outcome, reason = Outcome.JAM, f"stuck {short * 1e3:.3f} mm short of seated"
