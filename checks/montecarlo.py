@@ -11,7 +11,7 @@ was drawn and what happened (``trials.parquet``).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,6 +29,7 @@ from serpar.sim.trial_scene import TrialIds, TrialSceneConfig, build_trial_spec
 from serpar.tasks.episode_config import EpisodeConfig, Outcome, wilson_interval
 from serpar.tasks.insertion import InsertionConfig
 from serpar.tasks.insertion_batch import Trial, TrialConfig, TrialResult, run_trials
+from serpar.tasks.ray_runner import ray_map
 from serpar.tasks.trial_start import TrialStart, plan_start
 
 BATCH = 256
@@ -66,6 +67,8 @@ class MonteCarloResult:
     rows: list[TrialRow] = field(default_factory=list)
     wall_s: float = 0.0
     interrupted: bool = False
+    errors: list[str] = field(default_factory=list)
+    """Batches that did not come back (a Ray task that died), with why."""
 
     @property
     def counts(self) -> dict[str, int]:
@@ -131,34 +134,63 @@ def prepare(cfg: MonteCarloConfig, seed: int, trials: range, q_guess: np.ndarray
     return models, starts, samples
 
 
+def run_block(cfg: MonteCarloConfig, seed: int, first: int, stop: int, threads: int = 1,
+              on_period: Callable[[int], None] | None = None) -> list[TrialRow]:
+    """Trials first..stop-1 as one batch (a local batch, or one Ray task)."""
+    block = range(first, stop)
+    scene = scene_config(cfg)
+    # every trial's inverse kinematics from the same guess: the arm has one redundant joint,
+    # so the elbow a solution lands on depends on where the search started
+    models, starts, samples = prepare(cfg, seed, block, np.array(HOME_Q))
+    trials = [Trial(m, st, sd, s.draw.hole_diameter) for m, st, sd, s in
+              zip(models, starts, trial_seeds(seed, block), samples)]
+    results = run_trials(trials, scene.chamfer, trial_config(cfg), threads, on_period)
+    return [TrialRow(k, s, _tip_off_axis(st, scene) * 1e3, r)
+            for k, s, st, r in zip(block, samples, starts, results)]
+
+
+def _ray_block(_: None, cfg: MonteCarloConfig, seed: int, first: int, stop: int) -> list[TrialRow]:
+    return run_block(cfg, seed, first, stop)
+
+
 def run_montecarlo(cfg: MonteCarloConfig, trials: int, seed: int, threads: int = 2,
                    batch: int = BATCH, on_batch: Callable[[list[TrialRow]], None] | None = None,
-                   on_period: Callable[[int], None] | None = None) -> MonteCarloResult:
-    """``trials`` trials in batches of ``batch``; Ctrl-C keeps the batches that finished."""
+                   on_period: Callable[[int], None] | None = None,
+                   ray_address: str | None = None) -> MonteCarloResult:
+    """``trials`` trials in batches of ``batch``, here on ``threads`` threads or as one Ray task
+    per batch (``ray_address``); Ctrl-C keeps the batches that finished. A dead Ray task's
+    trials are missing from the result, and the reason is in ``errors``."""
     if trials < 1 or threads < 1 or batch < 1:
         raise ConfigError(f"trials {trials}, threads {threads}, batch {batch}: each must be >= 1")
     t0 = time.perf_counter()
     result = MonteCarloResult(cfg, seed, trials)
-    scene, tcfg = scene_config(cfg), trial_config(cfg)
-    q_guess = np.array(HOME_Q)
+    blocks = [(first, min(first + batch, trials)) for first in range(0, trials, batch)]
     try:
-        for first in range(0, trials, batch):
-            block = range(first, min(first + batch, trials))
-            # every trial's inverse kinematics from the same guess: the arm has one redundant
-            # joint, so the elbow a solution lands on depends on where the search started
-            models, starts, samples = prepare(cfg, seed, block, q_guess)
-            batch_trials = [Trial(m, st, sd, s.draw.hole_diameter) for m, st, sd, s in
-                            zip(models, starts, trial_seeds(seed, block), samples)]
-            results = run_trials(batch_trials, scene.chamfer, tcfg, threads, on_period)
-            rows = [TrialRow(k, s, _tip_off_axis(st, scene) * 1e3, r)
-                    for k, s, st, r in zip(block, samples, starts, results)]
+        if ray_address is None:
+            done = (run_block(cfg, seed, a, b, threads, on_period) for a, b in blocks)
+        else:
+            done = _ray_rows(cfg, seed, blocks, ray_address, result)
+        for rows in done:
             result.rows.extend(rows)
             if on_batch is not None:
                 on_batch(rows)
     except KeyboardInterrupt:
         result.interrupted = True
+    result.rows.sort(key=lambda r: r.trial)
     result.wall_s = time.perf_counter() - t0
     return result
+
+
+def _ray_rows(cfg: MonteCarloConfig, seed: int, blocks: list[tuple[int, int]], address: str,
+              result: MonteCarloResult) -> Iterator[list[TrialRow]]:
+    args = [(cfg, seed, a, b) for a, b in blocks]
+    for i, rows, exc in ray_map(_ray_block, args, address):
+        if exc is not None:
+            a, b = blocks[i]
+            result.errors.append(f"trials {a}-{b - 1}: {type(exc).__name__}: "
+                                 f"{(str(exc).strip().splitlines() or [''])[0]}")
+            continue
+        yield rows
 
 
 def write_parquet(result: MonteCarloResult, path: Path) -> None:

@@ -11,6 +11,7 @@ from serpar.checks.montecarlo import BATCH, MonteCarloResult, run_montecarlo, wr
 from serpar.checks.montecarlo_config import MonteCarloConfig
 from serpar.checks.montecarlo_report import sensitivity_rows, write_montecarlo_report
 from serpar.cli import arg_types
+from serpar.cli.cmd_run import check_ray
 from serpar.cli.out_paths import add_force, out_file, out_folder
 from serpar.cli.output import print_json, progress, table
 from serpar.errors import ConfigError
@@ -43,6 +44,9 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help=f"CPU threads of the batched physics (default: all, {os.cpu_count()})")
     p.add_argument("--batch", type=int, default=BATCH,
                    help=f"trials simulated together (default {BATCH}; results do not depend on it)")
+    p.add_argument("--ray", metavar="ADDRESS",
+                   help="one Ray task per batch on a cluster: local, auto or ray://HOST:PORT "
+                        "(cluster extra); results equal a local run's")
     p.add_argument("--out", metavar="DIR", help="write DIR/trials.parquet (one row per trial) and "
                                                 "DIR/summary.json")
     p.add_argument("--report", metavar="OUT.html", help="HTML report with the plots")
@@ -58,7 +62,7 @@ def summary(result: MonteCarloResult) -> dict[str, object]:
     return {"trials": len(result.rows), "trials_asked": result.trials_asked,
             "interrupted": result.interrupted, "seed": result.seed,
             "success_rate": result.success_rate, "ci_low": lo, "ci_high": hi,
-            "outcomes": result.counts, "wall_s": result.wall_s,
+            "outcomes": result.counts, "wall_s": result.wall_s, "errors": result.errors,
             "peak_force_n": {"mean": sum(peaks) / len(peaks) if peaks else None,
                              "max": max(peaks) if peaks else None},
             "sensitivity": {s: {"auc": a, "mean_seated": ok, "mean_failed": bad}
@@ -70,6 +74,7 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
     if args.trials < 1 or args.threads < 1 or args.batch < 1:
         raise ConfigError(f"--trials {args.trials}, --threads {args.threads}, --batch {args.batch}: "
                           "each must be >= 1")
+    check_ray(args.ray, 1)
     cfg = load_yaml_config(MonteCarloConfig, args.config) if args.config else MonteCarloConfig()
     out = out_folder(args.out, "--out", args.force, OUT_FILES) if args.out else None
     report = out_file(args.report, "--report", args.force, suffix=".html") if args.report else None
@@ -80,7 +85,10 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
         seated = sum(r.result.outcome.value == "success" for r in rows)
         bar.set_postfix_str(f"last batch {seated}/{len(rows)} seated")
 
-    result = run_montecarlo(cfg, args.trials, args.seed, args.threads, args.batch, on_batch)
+    result = run_montecarlo(cfg, args.trials, args.seed, args.threads, args.batch, on_batch,
+                            ray_address=args.ray)
+    for error in result.errors:
+        sys.stderr.write(f"serpar montecarlo: {error}\n")
     bar.close()
     if result.interrupted:
         sys.stderr.write(f"serpar montecarlo: interrupted; {len(result.rows)} of {args.trials} trials "

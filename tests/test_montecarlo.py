@@ -4,6 +4,7 @@ count or batch size, and the command's summary holds what the issue asks."""
 from __future__ import annotations
 
 import contextlib
+import functools
 import dataclasses
 import io
 import json
@@ -109,3 +110,15 @@ def test_bad_input_is_one_line(capsys) -> None:
     assert main(["montecarlo", "--trials", "0"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--trials 0" in err[0]
+
+
+@pytest.mark.slow
+@pytest.mark.xdist_group("ray")
+def test_ray_workers_give_the_local_result(monkeypatch) -> None:
+    """One Ray task per batch (a local Ray instance of 2 CPUs): the same rows as one process."""
+    ray = pytest.importorskip("ray")
+    monkeypatch.setattr(ray, "init", functools.partial(ray.init, num_cpus=2))
+    remote = run_montecarlo(CFG, 2, seed=5, batch=1, ray_address="local")
+    local = run_montecarlo(CFG, 2, seed=5, threads=1, batch=2)
+    assert not remote.errors and not ray.is_initialized()
+    assert [r.as_dict() for r in remote.rows] == [r.as_dict() for r in local.rows]
