@@ -1,10 +1,14 @@
-"""``ArmController`` for N trials: sensors -> nominal model -> wrench estimate -> laws -> torques,
-each step one set of numpy operations over the batch (no Python loop over trials within a
-control period; the sensors' streams refill every K periods). Trials may be in different laws
-and phases: targets are set per trial through `ids`.
+"""The arm controller for N trials: sensors -> nominal model -> wrench estimate -> laws ->
+torques, each step one set of numpy operations over the batch (no Python loop over trials within
+a control period; the sensors' streams refill every K periods). Trials may be in different laws
+and phases: targets are set per trial through `ids`. It is the only implementation: one arm in a
+plant MjData (the episode) is :class:`serpar.controllers.arm_controller.ArmController`, this at
+N = 1.
 
-The plant is the caller's (a ``mujoco.batch.Batch`` in the Monte Carlo): ``update`` takes the
-true joint state and torque-sensor readings as (N, 7) arrays and returns the saturated torques.
+It holds only what the pure laws cannot: the sensor model's drifting bias, the wrench filter,
+the force-loop reference offsets and the saturation record. The plant is the caller's (a
+``mujoco.batch.Batch`` in the Monte Carlo): ``update`` takes the true joint state and
+torque-sensor readings as (N, 7) arrays and returns the saturated torques.
 """
 
 from __future__ import annotations
@@ -15,47 +19,55 @@ import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from serpar.controllers.arm_controller import (
-    ArmControllerConfig,
-    ControlLaw,
-    SaturationRecord,
-)
+from serpar.controllers.arm_config import ArmControllerConfig, ControlLaw
 from serpar.controllers.batch_laws import (
     LAW_CODE,
     BatchCartesianTarget,
     BatchForceTarget,
     BatchTargets,
     law_torque,
+    laws_present,
     next_force_offset,
 )
 from serpar.controllers.batch_model import BatchNominalArm, dot
 from serpar.controllers.batch_sensors import BatchArmSensors, BatchMeasurement, Seed, trial_seeds
-from serpar.controllers.batch_wrench import BatchWrenchEstimator
+from serpar.controllers.wrench import BatchWrenchEstimator
 from serpar.errors import ConfigError, LimitError
 from serpar.sim.arm import HOME_Q, N_JOINTS, Q_MAX, Q_MIN, TORQUE_LIMITS
-from serpar.sim.arm_drive import saturate_torque
 
 Arr = NDArray[np.float64]
 Ids = NDArray[np.intp]
 _DOWN = np.array([0.0, 0.0, -1.0])
-"""The axis F_s is read along without a ForceTarget (as ArmController.measured_push)."""
+"""The axis F_s is read along without a force target."""
 _DEFAULT_CONFIG = ArmControllerConfig()
+_JOINT_PD, _FORCE_POSITION = LAW_CODE[ControlLaw.JOINT_PD], LAW_CODE[ControlLaw.FORCE_POSITION]
+_LIMITS = np.asarray(TORQUE_LIMITS)
+_NEG_LIMITS = -_LIMITS
 
 
 class BatchSaturationRecord:
-    """SaturationRecord per trial: periods with any joint saturated, worst request per joint."""
+    """Torque saturation is reported, never silent: per trial the periods with any joint
+    saturated and the worst request per joint (as a ratio of its limit)."""
 
     def __init__(self, n: int) -> None:
         self.periods = np.zeros(n, dtype=np.int64)
         self.worst_ratio = np.zeros((n, N_JOINTS))
-        self._limits = np.asarray(TORQUE_LIMITS)
 
-    def note(self, tau: Arr, saturated: NDArray[np.bool_]) -> None:
-        self.periods += saturated.any(axis=1)
-        np.maximum(self.worst_ratio, np.abs(tau) / self._limits, out=self.worst_ratio)
+    def saturate(self, tau: Arr) -> Arr:
+        """`tau` clipped to the Panda torque limits, noted (np.minimum of np.maximum: np.clip's
+        arithmetic without its Python wrapper)."""
+        magnitude = np.abs(tau)
+        self.periods += (magnitude > _LIMITS).any(axis=1)
+        np.maximum(self.worst_ratio, magnitude / _LIMITS, out=self.worst_ratio)
+        return np.minimum(np.maximum(tau, _NEG_LIMITS), _LIMITS)
 
     def summary(self, trial: int) -> str:
-        return SaturationRecord(int(self.periods[trial]), self.worst_ratio[trial].copy()).summary()
+        if self.periods[trial] == 0:
+            return "no torque saturation"
+        worst = self.worst_ratio[trial]
+        j = int(np.argmax(worst))
+        return (f"torque saturated in {self.periods[trial]} control periods; worst joint{j + 1} "
+                f"asked {worst[j]:.2f}x its limit")
 
 
 class BatchArmController:
@@ -85,8 +97,15 @@ class BatchArmController:
         self.has_force = np.zeros(n, dtype=bool)
         self.force_offset = np.zeros(n)
         self.q_posture = np.tile(np.asarray(HOME_Q), (n, 1))
+        self._modes()
         self.measurement: BatchMeasurement | None = None
         self.tau = np.zeros((n, N_JOINTS))
+        # views of the arrays above, which are only ever written in place
+        self._targets = BatchTargets(self.law, self.q_target, self.dq_target,
+                                     BatchCartesianTarget(self.cart_pos, self.cart_rot,
+                                                          self.cart_vel, self.cart_acc),
+                                     BatchForceTarget(self.force_axis, self.force),
+                                     self.has_force, self.force_offset, self.q_posture)
 
     def restart(self, ids: ArrayLike, seeds: Sequence[Seed]) -> None:
         """New trials in slots `ids` with streams `seeds`: as a freshly built controller."""
@@ -100,6 +119,19 @@ class BatchArmController:
             a[ids] = 0.0
         self.cart_rot[ids], self.force_axis[ids], self.has_force[ids] = np.eye(3), _DOWN, False
         self.q_posture[ids] = HOME_Q
+        self._modes()
+
+    def _modes(self) -> None:
+        """What the update needs to know of the trials' laws, worked out when they change (by
+        hold_joints, track, restart: ``law`` is written through them only), not per period."""
+        self._present = laws_present(self.law)
+        self._fp = self.law == _FORCE_POSITION
+        self._any_fp = _FORCE_POSITION in self._present
+        self._cartesian = self._present != (_JOINT_PD,)  # Jdot dq is read by these laws only
+        self._targets_set = bool(self._q_target_set.all())
+        has = self.has_force[0]
+        uniform = len(self._present) == 1 and bool((self.has_force == has).all())
+        self._uniform = (self._present[0], bool(has)) if uniform else None
 
     def _ids(self, ids: ArrayLike | None) -> Ids:
         return np.arange(self.n) if ids is None else np.asarray(ids, dtype=np.intp).reshape(-1)
@@ -117,14 +149,16 @@ class BatchArmController:
         self.law[ids] = LAW_CODE[ControlLaw.JOINT_PD]
         self.q_target[ids], self._q_target_set[ids] = q, True
         self.dq_target[ids] = 0.0 if dq is None else dq
+        self._modes()
 
     def track(self, pos: ArrayLike, rot: ArrayLike, vel: ArrayLike | None = None,
               acc: ArrayLike | None = None, law: ControlLaw = ControlLaw.IMPEDANCE,
               force_axis: ArrayLike | None = None, force: ArrayLike | None = None,
-              ids: ArrayLike | None = None) -> None:
+              ids: ArrayLike | None = None, unit_axis: bool = False) -> None:
         """Cartesian targets (and a push of `force` newtons along `force_axis`) of trials `ids`
-        for the impedance or force-position law, as ``ArmController.track``."""
-        ids = self._ids(ids)
+        for the impedance or force-position law; a new force task (another law, or no force
+        target before) starts from the position reference. `unit_axis`: the caller vouches
+        that the axes are unit vectors (a ForceTarget checked them)."""
         if law is ControlLaw.JOINT_PD:
             raise ConfigError("track() takes impedance or force_position; use hold_joints() for "
                               "joint_pd")
@@ -134,19 +168,34 @@ class BatchArmController:
         if law is ControlLaw.FORCE_POSITION and not has:
             raise ConfigError("force_position needs a force target (axis, newtons)")
         code = LAW_CODE[law]
-        # a new force task starts from the position reference
-        restart = (self.law[ids] != code) | ~self.has_force[ids]
-        self.force_offset[ids[restart]] = 0.0
-        if has:
-            axis = np.broadcast_to(np.asarray(force_axis, dtype=float), (len(ids), 3))
-            BatchForceTarget.checked(axis, np.broadcast_to(np.asarray(force, dtype=float), len(ids)))
-            self.force_axis[ids], self.force[ids] = axis, force
+        if ids is None and self._uniform is not None:
+            # every trial in one law and force mode, the usual case of a target that moves each
+            # period: the law bookkeeping is Python compares, only the targets are written
+            was, had = self._uniform
+            if was != code or not had:
+                self.force_offset[:] = 0.0
+            sel: slice | Ids = slice(None)
+            switched = (was, had) != (code, has)
         else:
-            self.force_axis[ids], self.force[ids] = _DOWN, 0.0
-        self.law[ids], self.has_force[ids] = code, has
-        self.cart_pos[ids], self.cart_rot[ids] = pos, rot
-        self.cart_vel[ids] = 0.0 if vel is None else vel
-        self.cart_acc[ids] = 0.0 if acc is None else acc
+            sel = self._ids(ids)
+            moved = self.law[sel] != code
+            restart = moved | ~self.has_force[sel]
+            self.force_offset[sel[restart]] = 0.0
+            switched = bool(moved.any() | (self.has_force[sel] != has).any())
+        if has:
+            axis = np.asarray(force_axis, dtype=float)
+            if not unit_axis:
+                count = self.n if isinstance(sel, slice) else len(sel)
+                BatchForceTarget.checked(np.broadcast_to(axis, (count, 3)), np.zeros(count))
+            self.force_axis[sel], self.force[sel] = axis, force
+        elif switched:  # no force target: F_s is read along -z, nothing fed forward
+            self.force_axis[sel], self.force[sel] = _DOWN, 0.0
+        self.cart_pos[sel], self.cart_rot[sel] = pos, rot
+        self.cart_vel[sel] = 0.0 if vel is None else vel
+        self.cart_acc[sel] = 0.0 if acc is None else acc
+        if switched:
+            self.law[sel], self.has_force[sel] = code, has
+            self._modes()
 
     def set_posture(self, q: ArrayLike, ids: ArrayLike | None = None) -> None:
         """Nullspace posture target of trials `ids` (default HOME_Q)."""
@@ -167,11 +216,7 @@ class BatchArmController:
 
     def targets(self) -> BatchTargets:
         """The trials' laws and targets now (views of the controller's arrays)."""
-        return BatchTargets(self.law, self.q_target, self.dq_target,
-                            BatchCartesianTarget(self.cart_pos, self.cart_rot, self.cart_vel,
-                                                 self.cart_acc),
-                            BatchForceTarget(self.force_axis, self.force), self.has_force,
-                            self.force_offset, self.q_posture)
+        return self._targets
 
     # --- the 1 kHz update --------------------------------------------------------------------
     def update(self, q: Arr, dq: Arr, tau: Arr) -> Arr:
@@ -179,21 +224,23 @@ class BatchArmController:
         trial's law, saturate; returns the (N, 7) torques to apply."""
         meas = self.sensors.read(q, dq, tau, self.dt)
         self.measurement = meas
-        self.nominal.load(meas.q, meas.dq)
-        terms = self.nominal.terms()
-        self.estimator.update(self.nominal, terms.jac, meas.tau_J, self.dt)
-        if not self._q_target_set.all():  # JOINT_PD without a target holds the first reading
-            unset = ~self._q_target_set & (self.law == LAW_CODE[ControlLaw.JOINT_PD])
+        nominal = self.nominal
+        nominal.load(meas.q, meas.dq, adopt=True)  # the sensors' fresh arrays
+        terms = nominal.terms(jdot=self._cartesian)
+        self.estimator.update(nominal, terms, meas.tau_J, self.dt)
+        if not self._targets_set:  # JOINT_PD without a target holds the first reading
+            unset = ~self._q_target_set & (self.law == _JOINT_PD)
             self.q_target[unset], self._q_target_set[unset] = meas.q[unset], True
-        push = self.measured_push()
-        targets = self.targets()
-        tau_cmd = law_torque(terms, targets, push, self.config)
-        # elementwise, so computing every trial's and keeping the force-position ones' is exact
-        offset = next_force_offset(self.force_offset, targets.force, push,
-                                   self.config.force_position, self.dt)
-        fp = self.law == LAW_CODE[ControlLaw.FORCE_POSITION]
-        self.force_offset = np.where(fp, offset, self.force_offset)
-        tau_sat, saturated = saturate_torque(tau_cmd)
-        self.saturation.note(tau_cmd, saturated)
-        self.tau = tau_sat
-        return tau_sat
+            self._targets_set = bool(self._q_target_set.all())
+        has = self.has_force[0]
+        uniform = len(self._present) == 1 and bool((self.has_force == has).all())
+        self._uniform = (self._present[0], bool(has)) if uniform else None
+        push = self.measured_push() if self._any_fp else None
+        tau_cmd = law_torque(terms, self._targets, push, self.config, self._present)
+        if push is not None:
+            # elementwise, so computing every trial's and keeping the force-position ones' is exact
+            offset = next_force_offset(self.force_offset, self._targets.force, push,
+                                       self.config.force_position, self.dt)
+            np.copyto(self.force_offset, offset, where=self._fp)
+        self.tau = self.saturation.saturate(tau_cmd)
+        return self.tau

@@ -1,21 +1,25 @@
-"""The arm control laws of :mod:`serpar.controllers.arm_laws` over a leading batch axis N.
+"""The arm control laws: pure functions of (nominal model terms at the measured state, targets,
+gains) over a leading batch axis N; one arm is a batch of one.
 
-Same maths in the same operation order (matrix products per trial through np.matmul, which
-takes the BLAS kernels the single-arm ``@`` takes; the quaternion helpers spell out MuJoCo's
-mju_ functions), so a trial's torque equals the single-arm law's to round-off, in practice
-bit for bit (tests/test_batch_controller.py). Trials may run different laws: ``law_torque``
-evaluates each law on the trials that are in it.
+Every law returns joint torques including the model's gravity and Coriolis terms; the caller
+saturates them. Matrix products run per trial through np.matmul, which takes the BLAS kernels a
+single ``@`` takes, and the quaternion helpers spell out MuJoCo's mju_ functions, so a trial's
+torque does not depend on the batch it runs in and is what the single-arm laws gave, bit for bit
+(tests/test_arm_controller_reference.py, tests/test_batch_controller.py). Trials may run
+different laws: ``law_torque`` evaluates each law on the trials that are in it. The gains and
+target types are :mod:`serpar.controllers.arm_laws`'.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from serpar.controllers.arm_controller import ArmControllerConfig, ControlLaw
+from serpar.controllers import arm_laws
+from serpar.controllers.arm_config import ArmControllerConfig, ControlLaw
 from serpar.controllers.arm_laws import (
     CartesianTarget,
     ForcePositionGains,
@@ -33,8 +37,8 @@ LAWS: tuple[ControlLaw, ...] = tuple(ControlLaw)
 LAW_CODE: dict[ControlLaw, int] = {law: k for k, law in enumerate(LAWS)}
 
 
-@dataclass(frozen=True, eq=False)
-class BatchCartesianTarget:
+# NamedTuples, not frozen dataclasses: one is built every period (a third of the cost)
+class BatchCartesianTarget(NamedTuple):
     """Desired TCP pose, twist and acceleration of N trials (arm base frame)."""
 
     pos: Arr
@@ -55,8 +59,7 @@ class BatchCartesianTarget:
         return BatchCartesianTarget(self.pos[ids], self.rot[ids], self.vel[ids], self.acc[ids])
 
 
-@dataclass(frozen=True, eq=False)
-class BatchForceTarget:
+class BatchForceTarget(NamedTuple):
     """Push with `force` newtons along the unit `axis`, per trial."""
 
     axis: Arr
@@ -81,8 +84,7 @@ class BatchForceTarget:
         return BatchForceTarget(self.axis[ids], self.force[ids])
 
 
-@dataclass(frozen=True, eq=False)
-class BatchTargets:
+class BatchTargets(NamedTuple):
     """Each trial's law and targets; a law reads only the rows of its own trials."""
 
     law: NDArray[np.int8]
@@ -167,8 +169,29 @@ def quat2vel(quat: Arr) -> Arr:
     return axis * speed[:, None]
 
 
-def orientation_error(rot: Arr, target_rot: Arr) -> Arr:
-    """(N, 3) rotation vectors taking rot to target_rot, in the base frame [rad]."""
+ROWWISE_MAX = 8
+"""Up to this many rows :func:`orientation_error` calls MuJoCo's own functions row by row (five
+calls a row); above it the ~80 numpy calls of the vectorised copy cost less. Same numbers."""
+
+
+def orientation_error(rot: Arr, target_rot: Arr, out: Arr | None = None) -> Arr:
+    """(N, 3) rotation vectors taking rot to target_rot, in the base frame [rad] (into `out`
+    if given)."""
+    if len(rot) > ROWWISE_MAX:
+        err = orientation_error_vectorised(rot, target_rot)
+        if out is None:
+            return err
+        out[:] = err
+        return out
+    out = np.empty((len(rot), 3)) if out is None else out
+    for a, b, row in zip(rot, target_rot, out):
+        arm_laws.orientation_error(a, b, row)
+    return out
+
+
+def orientation_error_vectorised(rot: Arr, target_rot: Arr) -> Arr:
+    """:func:`orientation_error` as numpy calls over the whole batch: mju_mat2Quat, mju_negQuat,
+    mju_mulQuat and mju_quat2Vel row-wise."""
     n = len(rot)
     with np.errstate(divide="ignore", invalid="ignore"):  # the masked-out rows' 1/0
         quats = mat2quat(np.concatenate([rot, target_rot]))
@@ -177,29 +200,37 @@ def orientation_error(rot: Arr, target_rot: Arr) -> Arr:
 
 # --- the laws ----------------------------------------------------------------------------------
 def pose_error(terms: ArmTerms, target: BatchCartesianTarget) -> Arr:
-    return np.concatenate([target.pos - terms.pos, orientation_error(terms.rot, target.rot)],
-                          axis=1)
+    """(N, 6) position and orientation error of the TCP to the target."""
+    err = np.empty((len(terms.pos), 6))
+    np.subtract(target.pos, terms.pos, out=err[:, :3])
+    orientation_error(terms.rot, target.rot, err[:, 3:])
+    return err
 
 
 def joint_pd_torque(terms: ArmTerms, q_target: Arr, dq_target: Arr, gains: JointGains) -> Arr:
     """tau = Kp (q* - q) + Kd (dq* - dq) + c + g."""
-    return (np.asarray(gains.kp) * (q_target - terms.q) + np.asarray(gains.kd) * (dq_target - terms.dq)
-            + terms.bias)
+    return gains.kp_array * (q_target - terms.q) + gains.kd_array * (dq_target - terms.dq) + terms.bias
 
 
 def impedance_torque(terms: ArmTerms, target: BatchCartesianTarget, gains: ImpedanceGains,
                      force_ff: Arr | None, q_posture: Arr) -> Arr:
-    """Seed Eq. 3 per trial (see arm_laws.impedance_torque)."""
-    jac, dq = terms.jac, terms.dq
+    """Seed Eq. 3: tau = J^T (F_d + Lambda acc* + K_d dx + D_d dv) + c + g + nullspace posture;
+    `force_ff` is F_d (N, 6) or None."""
+    jac, dq, jdot_dq = terms.jac, terms.dq, terms.jdot_dq
+    if jdot_dq is None:
+        raise ConfigError("the Cartesian laws need terms loaded with Jdot dq (terms(jdot=True))")
     jac_t = jac.transpose(0, 2, 1)
     minv_jt = np.linalg.solve(terms.mass, jac_t)
     lam = np.linalg.inv(np.matmul(jac, minv_jt))
-    acc = target.acc - terms.jdot_dq
+    # acc* - Jdot dq: the Cartesian acceleration the joint accelerations must add
+    acc = target.acc - jdot_dq
     wrench = (mat_vec(lam, acc) + gains.stiffness_array * pose_error(terms, target)
               + gains.damping_array * (target.vel - mat_vec(jac, dq)))
     if force_ff is not None:
         wrench = wrench + force_ff
     tau_null = gains.nullspace_stiffness * (q_posture - terms.q) - gains.nullspace_damping * dq
+    # Dynamically consistent projection (I - J^T Lambda J M^-1) tau_null, as vectors: the
+    # posture torque cannot disturb the TCP.
     wrench = wrench - mat_vec(lam, mat_vec(minv_jt.transpose(0, 2, 1), tau_null))
     return mat_vec(jac_t, wrench) + tau_null + terms.bias
 
@@ -207,11 +238,15 @@ def impedance_torque(terms: ArmTerms, target: BatchCartesianTarget, gains: Imped
 def force_position_torque(terms: ArmTerms, target: BatchCartesianTarget,
                           gains: ForcePositionGains, force: BatchForceTarget,
                           measured_force: Arr, offset: Arr, q_posture: Arr) -> Arr:
-    """Fig. 4 per trial (see arm_laws.force_position_torque); measured_force is F_s (N,)."""
+    """Fig. 4: impedance about target shifted by `offset` along the axis, plus
+    (F_d + k_f (F_d - F_s)) along the axis, less the speed limit's brake; measured_force is F_s
+    (N,) along the axis."""
     axis = force.axis
     shifted = BatchCartesianTarget(target.pos + offset[:, None] * axis, target.rot, target.vel,
                                    target.acc)
     push = force.force + gains.force_feedback * (force.force - measured_force)
+    # The limit is on speed beyond the reference's own (a commanded move along the axis is not
+    # braked; a push into a hole from a held pose is).
     velocity = mat_vec(terms.jac[:, :3], terms.dq)
     excess = dot(axis, velocity - target.vel[:, :3]) - gains.max_speed
     push = push - gains.speed_damping * np.maximum(0.0, excess)
@@ -221,36 +256,55 @@ def force_position_torque(terms: ArmTerms, target: BatchCartesianTarget,
 
 def next_force_offset(offset: Arr, force: BatchForceTarget, measured_force: Arr,
                       gains: ForcePositionGains, dt: float) -> Arr:
-    """The reference offsets one period on (see arm_laws.next_force_offset)."""
-    rate = np.clip(gains.admittance * (force.force - measured_force), -gains.max_offset_rate,
-                   min(gains.max_offset_rate, gains.max_speed))
-    return np.clip(offset + rate * dt, -gains.max_offset, gains.max_offset)
+    """Integrate the reference offsets: d(offset)/dt = admittance (F_d - F_s), clamped; toward
+    the push no faster than the speed limit, else the reference winds up ahead of a braked TCP
+    and the stored spring force overshoots the target on contact. (np.minimum of np.maximum:
+    np.clip's arithmetic without its Python wrapper, which costs more than the clip at N = 1.)"""
+    rate = np.minimum(np.maximum(gains.admittance * (force.force - measured_force),
+                                 -gains.max_offset_rate),
+                      min(gains.max_offset_rate, gains.max_speed))
+    return np.minimum(np.maximum(offset + rate * dt, -gains.max_offset), gains.max_offset)
 
 
-def law_torque(terms: ArmTerms, targets: BatchTargets, measured_push: Arr,
-               config: ArmControllerConfig) -> Arr:
-    """(N, 7) torques, each trial by its own law (unsaturated; includes c + g)."""
-    n = len(targets.law)
-    tau = np.empty((n, terms.q.shape[1]))
-    counts = np.bincount(targets.law, minlength=len(LAWS))
-    for code, law in enumerate(LAWS):
-        if counts[code] == 0:
-            continue
-        whole = counts[code] == n  # every trial in one law: views, no gathers
-        ids: Ids | slice = slice(None) if whole else np.flatnonzero(targets.law == code)
-        t = terms if whole else terms.take(ids)
-        cart = targets.cart if whole else targets.cart.take(ids)
-        force = targets.force if whole else targets.force.take(ids)
-        posture = targets.posture[ids]
-        if law is ControlLaw.JOINT_PD:
-            tau[ids] = joint_pd_torque(t, targets.q[ids], targets.dq[ids], config.joint)
-        elif law is ControlLaw.IMPEDANCE:
-            # Eq. 3's F_d is fed forward where a ForceTarget is set (x + 0.0 == x elsewhere)
-            ff = np.concatenate([force.force[:, None] * force.axis, np.zeros((len(t.q), 3))],
-                                axis=1)
-            ff[~targets.has_force[ids]] = 0.0
-            tau[ids] = impedance_torque(t, cart, config.impedance, ff, posture)
-        else:
-            tau[ids] = force_position_torque(t, cart, config.force_position, force,
-                                             measured_push[ids], targets.offset[ids], posture)
+def laws_present(law: NDArray[np.int8]) -> tuple[int, ...]:
+    """The codes of the laws some trial is in (ascending)."""
+    return tuple(int(k) for k in np.flatnonzero(np.bincount(law, minlength=len(LAWS))))
+
+
+def law_torque(terms: ArmTerms, targets: BatchTargets, measured_push: Arr | None,
+               config: ArmControllerConfig, present: tuple[int, ...] | None = None) -> Arr:
+    """(N, 7) torques, each trial by its own law (unsaturated; includes c + g); measured_push
+    is F_s (N,), read only by FORCE_POSITION trials (None when there are none); `present`:
+    :func:`laws_present` of targets.law, if the caller keeps it."""
+    present = laws_present(targets.law) if present is None else present
+    if len(present) == 1:  # every trial in one law: views, no gathers
+        return _one_law(LAWS[present[0]], terms, targets, slice(None), measured_push, config)
+    tau = np.empty((len(targets.law), terms.q.shape[1]))
+    for code in present:
+        ids = np.flatnonzero(targets.law == code)
+        tau[ids] = _one_law(LAWS[code], terms.take(ids), targets, ids, measured_push, config)
     return tau
+
+
+def _one_law(law: ControlLaw, terms: ArmTerms, targets: BatchTargets, ids: Ids | slice,
+             measured_push: Arr | None, config: ArmControllerConfig) -> Arr:
+    """The torques of trials `ids`, all in `law` (`terms` already theirs)."""
+    whole = isinstance(ids, slice)
+    if law is ControlLaw.JOINT_PD:
+        return joint_pd_torque(terms, targets.q[ids], targets.dq[ids], config.joint)
+    cart = targets.cart if whole else targets.cart.take(ids)
+    force = targets.force if whole else targets.force.take(ids)
+    posture = targets.posture[ids]
+    if law is ControlLaw.IMPEDANCE:
+        # Eq. 3's F_d is fed forward where a ForceTarget is set (x + 0.0 == x elsewhere)
+        has = targets.has_force[ids]
+        ff = None
+        if has.any():
+            ff = np.concatenate([force.force[:, None] * force.axis, np.zeros((len(has), 3))],
+                                axis=1)
+            ff[~has] = 0.0
+        return impedance_torque(terms, cart, config.impedance, ff, posture)
+    if measured_push is None:
+        raise ConfigError("force_position trials need the measured push F_s")
+    return force_position_torque(terms, cart, config.force_position, force, measured_push[ids],
+                                 targets.offset[ids], posture)

@@ -2,17 +2,18 @@
 
 Trial i draws from ``SeedSequence(seed, spawn_key=(i,))`` (numpy's i-th spawned child of
 ``seed``), so its noise is the same whether it runs alone, in a batch of 7 or of 1000, on any
-thread count or machine. A stream is consumed exactly as :class:`ArmSensors` consumes its
-Generator (the bias at start-up, then per read the bias walk, the torque noise and the velocity
-noise, each channel only when its sigma is positive): given the same SeedSequence a trial reads
-what ``ArmSensors`` reads, bit for bit. The normals are drawn K periods at a time, so the Python
-loop over trials runs once every K periods, never within one.
+thread count or machine. A stream is consumed in one fixed order (the bias at start-up, then
+per read the bias walk, the torque noise and the velocity noise, each channel only when its
+sigma is positive): the order the one-arm sensor model drew in before it became this at N = 1,
+so an arm seeded with SeedSequence(seed) (``np.random.default_rng(seed)``'s stream) reads the
+noise it read then, bit for bit (tests/test_arm_controller_reference.py). The normals are drawn
+K periods at a time, so the Python loop over trials runs once every K periods, never within one.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,8 +38,7 @@ def plant_arm_state(qpos: Arr, qvel: Arr, sensordata: Arr, index: ArmIndex) -> t
     return qpos[:, index.qpos], qvel[:, index.dof], sensordata[:, index.torque_adr]
 
 
-@dataclass(frozen=True, eq=False)
-class BatchMeasurement:
+class BatchMeasurement(NamedTuple):
     q: Arr
     """(N, 7) encoder angles [rad]."""
     dq: Arr
@@ -48,7 +48,7 @@ class BatchMeasurement:
 
 
 class BatchArmSensors:
-    """The sensor model of :class:`ArmSensors` for N trials (bias drift, noise, quantisation)."""
+    """The arm's sensor model for N trials (bias drift, noise, quantisation; one arm: N = 1)."""
 
     def __init__(self, config: ArmSensorConfig, seeds: Sequence[Seed], chunk: int = 100) -> None:
         if chunk < 1:
@@ -56,14 +56,21 @@ class BatchArmSensors:
         if len(seeds) < 1:
             raise ConfigError("BatchArmSensors needs a seed per trial, got none")
         self.config, self.n, self.chunk = config, len(seeds), chunk
-        # per read, in ArmSensors' order: bias walk, torque noise, velocity noise
+        # per read, in the drawing order: bias walk, torque noise, velocity noise
         sigmas = (config.torque_bias_walk, config.torque_noise_std, config.velocity_noise_std)
         self._live = tuple(s > 0 for s in sigmas)
         self._width = N_JOINTS * sum(self._live)
+        # the constant sigmas are applied once per chunk (the same products a read would form);
+        # the walk's depends on the read's dt and stays per read
+        scales = (1.0, config.torque_noise_std, config.velocity_noise_std)
+        self._scale = np.repeat([s for s, live in zip(scales, self._live) if live], N_JOINTS)
         self._rngs: list[np.random.Generator] = [np.random.default_rng(0)] * self.n  # reseed() below
         self.bias = np.zeros((self.n, N_JOINTS))
         self._draws = np.zeros((self.n, chunk, self._width))
-        self._cursor = np.full(self.n, chunk)
+        # one cursor for all trials: a trial started mid-chunk gets its first normals from there
+        self._cursor = chunk
+        self._dt = float("nan")
+        self._walk_step = 0.0
         self.reseed(np.arange(self.n), seeds)
 
     def reseed(self, slots: NDArray[np.intp], seeds: Sequence[Seed]) -> None:
@@ -74,35 +81,38 @@ class BatchArmSensors:
             rng = np.random.Generator(np.random.PCG64(seed))
             self._rngs[slot] = rng
             self.bias[slot] = rng.normal(0.0, self.config.torque_bias_std, N_JOINTS)
-        self._cursor[slots] = self.chunk  # the next read draws their first chunk
+            if self._cursor < self.chunk:  # a Generator's normals come in the same sequence
+                self._fill(rng, self._draws[slot, self._cursor:])  # however they are grouped
 
-    def _normals(self) -> Arr:
-        """(N, width) standard normals of this read, each trial's next from its own stream."""
-        if self._width == 0:
-            return self._draws[:, 0]
-        for slot in np.flatnonzero(self._cursor == self.chunk):  # once every `chunk` reads
-            # a Generator's normals come in the same sequence however they are grouped
-            self._draws[slot] = self._rngs[slot].standard_normal((self.chunk, self._width))
-            self._cursor[slot] = 0
-        z = self._draws[np.arange(self.n), self._cursor]
+    def _fill(self, rng: np.random.Generator, rows: Arr) -> None:
+        rng.standard_normal(out=rows)
+        rows *= self._scale
+
+    def _next(self) -> Arr:
+        """(N, width) this read's scaled normals, each trial's next from its own stream."""
+        if self._cursor == self.chunk:  # once every `chunk` reads
+            for slot, rng in enumerate(self._rngs):
+                self._fill(rng, self._draws[slot])
+            self._cursor = 0
         self._cursor += 1
-        return z
+        return self._draws[:, self._cursor - 1]
 
     def read(self, q: Arr, dq: Arr, tau: Arr, dt: float) -> BatchMeasurement:
         """Sample the sensors of the true (N, 7) q, dq and link-side torque; `dt` is the time
         since the last read."""
-        cfg, z = self.config, self._normals()
+        cfg = self.config
         walk, tau_noise, dq_noise = self._live
+        z = self._next() if self._width else self._draws[:, 0]  # ideal sensors: no draws
         k = 0  # the next channel's first column in z
         if walk:
-            self.bias += cfg.torque_bias_walk * np.sqrt(dt) * z[:, k:k + N_JOINTS]
+            if dt != self._dt:
+                self._dt, self._walk_step = dt, cfg.torque_bias_walk * np.sqrt(dt)
+            self.bias += self._walk_step * z[:, :N_JOINTS]
             k += N_JOINTS
         out_tau = tau + self.bias
         if tau_noise:
-            out_tau = out_tau + cfg.torque_noise_std * z[:, k:k + N_JOINTS]
+            out_tau += z[:, k:k + N_JOINTS]
             k += N_JOINTS
-        out_dq = np.array(dq, dtype=float)
-        if dq_noise:
-            out_dq += cfg.velocity_noise_std * z[:, k:k + N_JOINTS]
+        out_dq = dq + z[:, k:k + N_JOINTS] if dq_noise else np.array(dq, dtype=float)
         return BatchMeasurement(quantise(np.asarray(q, dtype=float), cfg.encoder_counts_per_rev),
                                 out_dq, out_tau)

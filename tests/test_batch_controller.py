@@ -1,5 +1,8 @@
-"""The batched arm controller stack (controllers/batch_*.py) against the single-arm one: model
-terms, laws, a closed loop over a mujoco.batch plant, and per-trial noise streams."""
+"""The batched arm controller stack (controllers/batch_*.py): its model terms against MuJoCo's own
+functions on an MjData, a trial's law the same in any batch, the one-arm adapter (ArmController,
+the batch at N = 1 on an MjData plant) against a mujoco.batch plant in closed loop, and per-trial
+noise streams. The numbers of the single-arm stack the batch replaced are held by
+tests/test_arm_controller_reference.py."""
 
 from __future__ import annotations
 
@@ -14,17 +17,16 @@ from serpar.controllers import arm_laws, batch_laws
 from serpar.controllers.arm_controller import (
     ArmController,
     ArmControllerConfig,
+    ArmSensors,
     ControlLaw,
     controller_config,
 )
 from serpar.controllers.arm_laws import CartesianTarget, ForceTarget
-from serpar.controllers.arm_model import NominalArm
-from serpar.controllers.arm_sensors import ArmSensorConfig, ArmSensors
+from serpar.controllers.arm_sensors import ArmSensorConfig
 from serpar.controllers.batch_controller import BatchArmController
 from serpar.controllers.batch_laws import LAW_CODE, BatchCartesianTarget, BatchForceTarget
-from serpar.controllers.batch_model import BatchNominalArm
+from serpar.controllers.batch_model import MDOT_STEP_RAD, BatchNominalArm
 from serpar.controllers.batch_sensors import BatchArmSensors, plant_arm_state, trial_seeds
-from serpar.controllers.momentum import MomentumTerms
 from serpar.errors import ConfigError, LimitError
 from serpar.sim.arm import HOME_Q, build_arm_spec
 from serpar.sim.arm_drive import ArmIndex
@@ -51,30 +53,58 @@ def _states(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
     return q, dq
 
 
-def test_batch_nominal_terms_equal_nominal_arm() -> None:
+def _mujoco_terms(model: mujoco.MjModel, q: np.ndarray, dq: np.ndarray) -> dict[str, np.ndarray]:
+    """The reference: MuJoCo's own functions on an MjData of the arm at (q, dq) (mj_jacSite,
+    mj_jacDot, mj_fullM, mj_rne), and Mdot dq by the central difference of mj_fullM."""
+    index = ArmIndex.from_model(model)
+    dof, site = index.dof, index.tcp_site
+    data = mujoco.MjData(model)
+
+    def at(qq: np.ndarray, vel: np.ndarray) -> np.ndarray:
+        data.qpos[index.qpos], data.qvel[dof] = qq, vel
+        for stage in (mujoco.mj_kinematics, mujoco.mj_comPos, mujoco.mj_crb, mujoco.mj_comVel):
+            stage(model, data)
+        full = np.zeros((model.nv, model.nv))
+        mujoco.mj_fullM(model, data, full)
+        return full[np.ix_(dof, dof)]
+
+    speed = float(np.linalg.norm(dq))
+    mdot = np.zeros(7)
+    if speed:
+        step = MDOT_STEP_RAD * dq / speed
+        mdot = (at(q + step, dq) - at(q - step, dq)) @ dq * (speed / (2 * MDOT_STEP_RAD))
+    mass = at(q, dq)
+    rne = np.zeros(model.nv)
+    mujoco.mj_rne(model, data, 0, rne)
+    jac, jdot = np.zeros((6, model.nv)), np.zeros((6, model.nv))
+    mujoco.mj_jacSite(model, data, jac[:3], jac[3:], site)
+    mujoco.mj_jacDot(model, data, jdot[:3], jdot[3:], data.site_xpos[site], model.site_bodyid[site])
+    link = mass - np.diag(model.dof_armature[dof])
+    return {"pos": data.site_xpos[site].copy(), "rot": data.site_xmat[site].reshape(3, 3).copy(),
+            "jac": jac[:, dof].copy(), "jdot": jdot[:, dof], "jdot_dq": jdot[:, dof] @ dq,
+            "mass": mass, "bias": rne[dof] + model.dof_damping[dof] * dq, "mdot_dq": mdot,
+            "beta": rne[dof] - mdot, "momentum": link @ dq}
+
+
+def test_batch_nominal_terms_equal_mujocos_functions() -> None:
     rng = np.random.default_rng(5)
     q, dq = _states(rng, 6)
     batch = BatchNominalArm(6)
     batch.load(q, dq)
     terms = batch.terms()
-    jdot = batch.tcp_jacobian_dot()
-    mdq, beta, momentum = batch.mass_dot_dq(), batch.beta(), batch.momentum()
-    single = NominalArm()
+    ours = {"pos": terms.pos, "rot": terms.rot, "jac": terms.jac,
+            "jdot": batch.tcp_jacobian_dot(), "jdot_dq": terms.jdot_dq, "mass": terms.mass,
+            "bias": terms.bias, "mdot_dq": batch.mass_dot_dq(), "beta": batch.beta(),
+            "momentum": batch.momentum()}
     worst: dict[str, float] = {}
     for i in range(6):
-        single.load(q[i], dq[i])
-        momenta = MomentumTerms(single)
-        pos, rot = single.tcp_pose()
-        jd = single.tcp_jacobian_dot()  # mj_jacDot
-        pairs = {"pos": (pos, terms.pos[i]), "rot": (rot, terms.rot[i]),
-                 "jac": (single.tcp_jacobian(), terms.jac[i]), "jdot": (jd, jdot[i]),
-                 "jdot_dq": (jd @ dq[i], terms.jdot_dq[i]), "mass": (single.mass(), terms.mass[i]),
-                 "bias": (single.bias(), terms.bias[i]), "mdot_dq": (momenta.mass_dot_dq(), mdq[i]),
-                 "beta": (momenta.beta(), beta[i]), "momentum": (momenta.momentum(), momentum[i])}
-        for name, (a, b) in pairs.items():
-            worst[name] = max(worst.get(name, 0.0), _worst(a, b))
+        for name, value in _mujoco_terms(batch.model, q[i], dq[i]).items():
+            worst[name] = max(worst.get(name, 0.0), _worst(value, ours[name][i]))
     assert max(worst.values()) <= 1e-12, worst
-    assert np.abs(mdq[1]).max() == 0.0 and np.abs(mdq[0]).max() > 1e-3  # the rest path is taken
+    assert np.abs(ours["mdot_dq"][1]).max() == 0.0 and np.abs(ours["mdot_dq"][0]).max() > 1e-3
+    # the joint-space laws' terms skip Jdot dq and are otherwise the same
+    lean = batch.terms(jdot=False)
+    assert lean.jdot_dq is None and np.array_equal(lean.jac, terms.jac)
 
 
 def test_atan2_is_the_c_librarys() -> None:
@@ -92,23 +122,28 @@ def test_orientation_error_equals_mujoco_quaternions() -> None:
     target = np.stack([_rotation(rng.normal(0.0, 2.0, 3)) for _ in range(400)])
     target[:50] = rot[:50]  # no error
     target[50:100] = np.stack([_rotation(np.array([np.pi - 1e-9, 0, 0])) @ r for r in rot[50:100]])
-    ours = batch_laws.orientation_error(rot, target)
+    ours = batch_laws.orientation_error(rot, target)  # 400 rows: the vectorised copy
     single = np.stack([arm_laws.orientation_error(a, b) for a, b in zip(rot, target)])
     assert _worst(ours, single) <= 1e-12
     assert np.array_equal(ours, single)
+    few = batch_laws.ROWWISE_MAX  # a few rows: MuJoCo's own, row by row
+    assert np.array_equal(batch_laws.orientation_error(rot[:few], target[:few]), single[:few])
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_batched_laws_equal_arm_laws_per_trial(seed: int) -> None:
+def test_a_trials_law_is_the_same_in_any_batch(seed: int) -> None:
+    """A trial's torque and force offset in a batch of 20 in mixed laws equal its own at N = 1
+    (each law runs on a gather of its rows; the orientation error is the vectorised copy of
+    MuJoCo's functions for 9 rows and MuJoCo's own for one)."""
     rng = np.random.default_rng(seed)
-    n = 5
+    n = 20
     q, dq = _states(rng, n)
     nominal = BatchNominalArm(n)
     nominal.load(q, dq)
     terms = nominal.terms()
-    laws = [ControlLaw.JOINT_PD, ControlLaw.IMPEDANCE, ControlLaw.FORCE_POSITION,
-            ControlLaw.IMPEDANCE, ControlLaw.FORCE_POSITION]
-    has_force = np.array([False, False, True, True, True])
+    laws = [ControlLaw.JOINT_PD] * 2 + [ControlLaw.IMPEDANCE] * 9 + [ControlLaw.FORCE_POSITION] * 9
+    law = rng.permutation(np.array([LAW_CODE[k] for k in laws], dtype=np.int8))
+    assert batch_laws.ROWWISE_MAX < 9
     cart = BatchCartesianTarget(
         terms.pos + rng.normal(0.0, 0.02, (n, 3)),
         np.stack([_rotation(rng.normal(0.0, 0.3, 3)) @ r for r in terms.rot]),
@@ -116,32 +151,23 @@ def test_batched_laws_equal_arm_laws_per_trial(seed: int) -> None:
     axis = rng.normal(size=(n, 3))
     force = BatchForceTarget(axis / np.linalg.norm(axis, axis=1)[:, None], rng.uniform(0, 8, n))
     targets = batch_laws.BatchTargets(
-        np.array([LAW_CODE[law] for law in laws], dtype=np.int8), q + rng.normal(0, 0.01, (n, 7)),
-        rng.normal(0, 0.1, (n, 7)), cart, force, has_force, rng.uniform(-0.01, 0.01, n),
+        law, q + rng.normal(0, 0.01, (n, 7)), rng.normal(0, 0.1, (n, 7)), cart, force,
+        np.arange(n) % 3 != 1, rng.uniform(-0.01, 0.01, n),
         np.asarray(HOME_Q) + rng.normal(0, 0.1, (n, 7)))
     push = rng.uniform(0, 8, n)
     tau = batch_laws.law_torque(terms, targets, push, CONFIG)
     offsets = batch_laws.next_force_offset(targets.offset, force, push, CONFIG.force_position, 1e-3)
-    single = NominalArm()
-    for i, law in enumerate(laws):
-        single.load(q[i], dq[i])
-        target = CartesianTarget(cart.pos[i], cart.rot[i], cart.vel[i], cart.acc[i])
-        ft = ForceTarget(force.axis[i], float(force.force[i]))
-        if law is ControlLaw.JOINT_PD:
-            ref = arm_laws.joint_pd_torque(single, targets.q[i], targets.dq[i], CONFIG.joint)
-        elif law is ControlLaw.IMPEDANCE:
-            ff = np.concatenate([ft.force * ft.axis, np.zeros(3)]) if has_force[i] else None
-            ref = arm_laws.impedance_torque(single, target, CONFIG.impedance, ff,
-                                            targets.posture[i])
-        else:
-            ref = arm_laws.force_position_torque(single, target, CONFIG.force_position, ft,
-                                                 float(push[i]), float(targets.offset[i]),
-                                                 targets.posture[i])
-        assert _worst(ref, tau[i]) <= 1e-12, (law, ref - tau[i])
-        assert np.array_equal(ref, tau[i]), law
-        assert offsets[i] == arm_laws.next_force_offset(float(targets.offset[i]), ft,
-                                                        float(push[i]), CONFIG.force_position,
-                                                        1e-3)
+    one = BatchNominalArm(1)
+    for i in range(n):
+        one.load(q[i:i + 1], dq[i:i + 1])
+        alone = batch_laws.BatchTargets(*(
+            t.take([i]) if isinstance(t, BatchCartesianTarget | BatchForceTarget) else t[i:i + 1]
+            for t in targets))
+        ref = batch_laws.law_torque(one.terms(), alone, push[i:i + 1], CONFIG)
+        assert np.array_equal(ref[0], tau[i]), (i, ref[0] - tau[i])
+        assert offsets[i] == batch_laws.next_force_offset(
+            targets.offset[i:i + 1], force.take([i]), push[i:i + 1], CONFIG.force_position, 1e-3)[0]
+    assert np.abs(tau).max() > 1.0
 
 
 # --- closed loop: ArmController on an MjData against BatchArmController on a Batch ------------
@@ -243,10 +269,11 @@ def test_trial_noise_does_not_depend_on_the_batch() -> None:
     assert _worst(noise[:, 0], noise[:, 1]) > 0.01  # trials do not share a stream
     assert 0.015 < float(np.std(noise - noise.mean(axis=0))) < 0.025  # sigma 0.02 N m white
 
-    # the same SeedSequence drives ArmSensors identically (its tau_J latched, q and dq from data)
+    # the one-arm view reads an MjData plant into the same model (tau_J latched, q and dq from data)
     model = build_arm_spec().compile()
     data = mujoco.MjData(model)
-    sensors = ArmSensors(ArmIndex.from_model(model), config, trial_seeds(11, [2])[0])
+    sensors = ArmSensors(ArmIndex.from_model(model),
+                         BatchArmSensors(config, trial_seeds(11, [2]), chunk=7))
     for k, expected in enumerate(reads_alone[:50]):
         data.qpos[:7], data.qvel[:7] = q[k, 2], dq[k, 2]
         sensors.latch(tau[k, 2])
