@@ -12,6 +12,7 @@ import json
 import numpy as np
 import pytest
 
+from serpar.checks.bench_montecarlo import montecarlo_bench
 from serpar.checks.montecarlo import run_montecarlo, scene_config, trial_config
 from serpar.checks.montecarlo_config import MonteCarloConfig, draw_trial
 from serpar.cli.entry import main
@@ -122,3 +123,10 @@ def test_ray_workers_give_the_local_result(monkeypatch) -> None:
     local = run_montecarlo(CFG, 2, seed=5, threads=1, batch=2)
     assert not remote.errors and not ray.is_initialized()
     assert [r.as_dict() for r in remote.rows] == [r.as_dict() for r in local.rows]
+
+
+def test_the_bench_times_trials_against_bare_batched_stepping() -> None:
+    report = montecarlo_bench(trials=2, threads=(1,))
+    one = report["by_threads"]["1"]
+    assert one["trials_per_s"] > 0 and one["bare_steps_per_s"] > 0
+    assert np.isfinite(one["overhead"]) and report["scaling"]["1"] == 1.0
