@@ -57,12 +57,6 @@ TARE_KNOT_S = 2.0
 sensor zeros walk (the cell's sensor model: 0.002 N m/sqrt(s), i.e. ~0.006 N m in 10 s, about
 twice a wrist joint's 1 ms-window noise); between knots 2 s apart the walk's bridge leaves
 ~0.001 N m. One knot per split block, so every knot is pinned by a training block."""
-EPISODE_STICK_VELOCITY = 0.05
-"""[rad/s] An episode's stick band, wider than a free-motion recording's 0.01: the cell's
-joints start and stop at 0.01-0.05 rad/s, where its MuJoCo frictionloss (a soft constraint,
-20 ms time constant) pushes along the motion of a decelerating joint instead of acting as
-Coulomb friction (the nominal 12-hole cell against itself: 1.34x the noise with 0.01, 1.00x
-with 0.05; docs/sim2real.md). A simulator artifact the band covers, not a drive's physics."""
 MAX_EFFECTS = 6
 """More than the engine's default 3: an episode holds the arm's dynamics (friction and its
 Stribeck fall, the held part's mass, the cell's sensor timing and latency) and its insertions'
@@ -250,7 +244,6 @@ def free_windows(rec: Recording, inner: ArmDynamicsFamily) -> tuple[NDArray[np.i
 
 def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None) -> EpisodeFamily:
     """The episode family of ``rec`` (IdentificationError names what the recording lacks)."""
-    inner = dynamics_family(rec, cfg or ArmDynamicsConfig(tare_knot_s=TARE_KNOT_S,
-                                                        stick_velocity=EPISODE_STICK_VELOCITY))
+    inner = dynamics_family(rec, cfg or ArmDynamicsConfig(tare_knot_s=TARE_KNOT_S))
     keep, excluded = free_windows(rec, inner)
     return EpisodeFamily(inner, keep, excluded, chamfer_slides(rec))

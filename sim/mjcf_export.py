@@ -57,10 +57,14 @@ def is_mjcf_path(path: str | Path) -> bool:
 
 
 def arm_spec(changes: ArmPlantChanges) -> mujoco.MjSpec:
-    """The arm's spec with ``changes``, stepping at the cell's timestep."""
+    """The arm's spec with ``changes``, stepping at the cell's timestep, its joints' dry
+    friction rows as stiff as the cell's (``PhysicsConfig.arm_friction_timeconst``)."""
+    physics = PhysicsConfig()
     spec = build_arm_spec()
-    spec.option.timestep = PhysicsConfig().timestep
+    spec.option.timestep = physics.timestep
     apply_arm_plant(spec, changes, spec.option.timestep)
+    for joint in JOINT_NAMES:
+        spec.joint(joint).solref_friction = [physics.arm_friction_timeconst, 1.0]
     return spec
 
 
@@ -114,6 +118,8 @@ def _write_changes(root: ET.Element, nominal: mujoco.MjSpec, plant: mujoco.MjSpe
                 el.set(attr, _number(getattr(joint, attr)))
         if not np.array_equal(joint.damping, old.damping):
             el.set("damping", _number(joint.damping[0]))
+        if not np.array_equal(joint.solref_friction, old.solref_friction):
+            el.set("solreffriction", _numbers(joint.solref_friction))
     for body in plant.bodies[1:]:
         old = nominal.body(body.name)
         if old is None:  # added by the plant: a body with an explicit inertial
@@ -203,6 +209,9 @@ def _header(model: DiagnosisModel, changes: ArmPlantChanges) -> str:
          "everything else as assets/arm/panda.xml writes it."),
         ("Each effect's MJCF form (e.g. joint_friction: frictionloss = Fc, damping = nominal + "
          "Fv): serpar/sim/plants/from_model_file.py."),
+        ("Every joint's solreffriction is serpar's (PhysicsConfig.arm_friction_timeconst): "
+         "MuJoCo's default 0.02 s friction row pushes a joint braked faster than v/0.02 s "
+         "along its motion."),
         "Established effects: " + (", ".join(model.effects) or "none") + "."]
     lines += [f"  {e}: {evidence[e]}" for e in model.effects if e in evidence]
     lines.append("Not expressed in MuJoCo (left out of the elements below):"

@@ -64,14 +64,15 @@ class PhysicsConfig:
     1e-4 the still platform froze 4.3-4.8 um short of a 2 mm move; at 1e-6 it stops within
     0.05 um. Not lower: seated journals chatter in their bores at 2-8e-7 m/s and would never
     sleep (measured at 1e-7). Tray parts fall asleep within 0.1 s either way."""
-    arm_friction_timeconst: float = 0.02
-    """solref time constant of the arm joints' dry friction rows (``frictionloss``) [s]; 0.02 is
-    MuJoCo's default. A friction row is soft: it pulls the joint's acceleration toward -v/tau,
-    so a joint other torques decelerate faster than that gets its dry friction pushed *along*
-    its motion near a stop (measured in the cell: joint 4 at 0.05 rad/s and 6 rad/s^2, the full
-    Fc reversed within 2 ms), which Coulomb friction never does. 5e-4 (twice the transit step)
-    keeps it Coulomb down to ~1e-3 rad/s (tests/test_dry_friction.py); every episode figure in
-    the docs was measured with 0.02."""
+    arm_friction_timeconst: float = 5e-4
+    """solref time constant of the arm joints' dry friction rows (``frictionloss``) [s]: twice
+    the transit step, the stiffest MuJoCo keeps unclamped. A friction row is soft: it pulls the
+    joint's acceleration toward -v/tau, so a joint other torques decelerate faster than v/tau
+    gets its dry friction pushed *along* its motion near a stop, which Coulomb friction never
+    does. With MuJoCo's default 0.02 s the cell's joint 4, braked at 6 rad/s^2 from 0.05 rad/s,
+    had its full Fc reversed within 2 ms, and the episode diagnosis read the cell's actuation
+    latency ~10 us early (docs/sim2real.md); 5e-4 keeps it Coulomb down to ~1e-3 rad/s
+    (tests/test_dry_friction.py)."""
     noslip_iterations: int = 10
     """MuJoCo's no-slip post-solve on friction: without it a soft friction constraint creeps,
     and a held part whose tip lands on the plate top rocks in the soft pads, spins up and
@@ -85,11 +86,6 @@ class PhysicsConfig:
         if self.precision_timeconst is not None and self.precision_timeconst < 2 * self.timestep:
             raise ConfigError(f"precision_timeconst {self.precision_timeconst} s below 2*timestep "
                               f"({2 * self.timestep} s): MuJoCo would clamp it")
-        finest = max(self.timestep, self.transit_timestep or 0.0)
-        if not 2 * finest * (1 - 1e-9) <= self.arm_friction_timeconst <= 1.0:
-            raise ConfigError(f"arm_friction_timeconst {self.arm_friction_timeconst} s: valid "
-                              f"{2 * finest:g}..1 s (at least twice the largest physics step, "
-                              "or MuJoCo clamps it)")
         if not 0 <= self.noslip_iterations <= 1000:
             raise ConfigError(f"noslip_iterations {self.noslip_iterations}: valid 0..1000 (0 = off)")
         if not 2.0 <= self.grip_timesteps <= 200.0:
@@ -99,6 +95,11 @@ class PhysicsConfig:
             if not self.timestep <= self.transit_timestep <= limit * (1 + 1e-9):
                 raise ConfigError(f"transit_timestep {self.transit_timestep} s: valid from timestep "
                                   f"({self.timestep} s) to half the pads' time constant ({limit:g} s), or null")
+        finest = max(self.timestep, self.transit_timestep or 0.0)
+        if not 2 * finest * (1 - 1e-9) <= self.arm_friction_timeconst <= 1.0:
+            raise ConfigError(f"arm_friction_timeconst {self.arm_friction_timeconst} s: valid "
+                              f"{2 * finest:g}..1 s (at least twice the largest physics step, "
+                              "or MuJoCo clamps it)")
         if not 0.0 < self.grip_friction_damping < 2.0:
             raise ConfigError(f"grip_friction_damping {self.grip_friction_damping}: valid (0, 2) "
                               "(b * timestep; 2 is the stability limit of a friction row)")

@@ -108,10 +108,6 @@ def test_sim2real_on_a_concealed_cell_moves_the_outcomes_toward_it(latency_cell)
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the episode diagnosis reads an actuation latency 10-20 us "
-                   "early: the cell's MuJoCo frictionloss (soft, 20 ms) pushes along the motion of "
-                   "a decelerating joint and the latency's regressor takes part of it "
-                   "(docs/sim2real.md, What falls short): 21 us, 2.8 sigma here")
 def test_the_concealed_latency_is_found_within_2_sigma(latency_cell) -> None:
     _, _, truth, out = latency_cell
     (found,) = out["established"]
