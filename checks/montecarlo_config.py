@@ -54,9 +54,9 @@ class MonteCarloConfig:
     """The part off the pads' centre along the pads (the pick from its tray pocket)."""
     grasp_tilt_sigma_deg: float = 0.3
     """The part's lean in the pads' plane."""
-    start_height_mm: float = 0.3
-    """Measured tip above the believed hole entry at the start: where the episode's platform
-    stops following the journal (tasks/episode_steps.py FOLLOW_STOP_ABOVE)."""
+    start_height_mm: float = 2.5
+    """Measured tip above the believed hole entry at the start: the hover, where the episode's
+    insertion starts (the platform then follows the TCP down to 0.3 mm above the entry)."""
     time_limit_s: float = 2.0
     """Simulated time a trial may take from its start; beyond it the trial is a timeout."""
     force_n: float = 5.0

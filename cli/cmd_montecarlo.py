@@ -10,6 +10,7 @@ import sys
 from serpar.checks.montecarlo import BATCH, MonteCarloResult, run_montecarlo, write_parquet
 from serpar.checks.montecarlo_config import MonteCarloConfig
 from serpar.checks.montecarlo_report import sensitivity_rows, write_montecarlo_report
+from serpar.checks.montecarlo_validation import validate
 from serpar.cli import arg_types
 from serpar.cli.cmd_run import check_ray
 from serpar.cli.out_paths import add_force, out_file, out_folder
@@ -47,6 +48,10 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--ray", metavar="ADDRESS",
                    help="one Ray task per batch on a cluster: local, auto or ray://HOST:PORT "
                         "(cluster extra); results equal a local run's")
+    p.add_argument("--validate", type=int, metavar="HOLES",
+                   help="instead: run a HOLES-hole episode (seed --seed) and replay each of its "
+                        "insertions as a trial from the state it started in; prints outcomes and "
+                        "peak forces side by side")
     p.add_argument("--out", metavar="DIR", help="write DIR/trials.parquet (one row per trial) and "
                                                 "DIR/summary.json")
     p.add_argument("--report", metavar="OUT.html", help="HTML report with the plots")
@@ -75,6 +80,8 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
         raise ConfigError(f"--trials {args.trials}, --threads {args.threads}, --batch {args.batch}: "
                           "each must be >= 1")
     check_ray(args.ray, 1)
+    if args.validate is not None:
+        return _validate(args)
     cfg = load_yaml_config(MonteCarloConfig, args.config) if args.config else MonteCarloConfig()
     out = out_folder(args.out, "--out", args.force, OUT_FILES) if args.out else None
     report = out_file(args.report, "--report", args.force, suffix=".html") if args.report else None
@@ -119,4 +126,23 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
     print(table(["error source", "AUC (failed vs seated)", "mean seated", "mean failed"],
                 [[s, "-" if a is None else f"{a:.3f}", f"{ok:.4g}", f"{bad:.4g}"]
                  for s, a, ok, bad in sensitivity_rows(result)]))
+    return 0
+
+
+def _validate(args: argparse.Namespace) -> int:
+    if not 1 <= args.validate <= 36:
+        raise ConfigError(f"--validate {args.validate}: holes 1..36")
+    report = validate(args.validate, args.seed, args.threads)
+    if args.json:
+        print_json(report)
+        return 0
+    rows = report["rows"]
+    print(table(["hole", "clearance um", "episode", "trial", "peak N episode", "trial", "ratio",
+                 "misalign. mm episode", "trial"],
+                [[r["hole"], f"{r['clearance_um']:.1f}", r["episode_outcome"], r["trial_outcome"],
+                  f"{r['episode_peak_n']:.3f}", f"{r['trial_peak_n']:.3f}", f"{r['peak_ratio']:.3f}",
+                  f"{r['episode_misalignment_mm']:.4f}", f"{r['trial_misalignment_mm']:.4f}"]
+                 for r in rows]))  # type: ignore[union-attr]
+    print(f"same outcome {report['same_outcome']}/{report['insertions']}; peak force within 5 % "
+          f"{report['peak_within_5pct']}/{report['insertions']}")
     return 0

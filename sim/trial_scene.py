@@ -2,11 +2,13 @@
 
 The cell's arm (its dry joint friction, gripper and pads as in the episode), one conductor and
 a patch of baseplate with one faceted bore whose entry is at the insertion station, where the
-Stewart platform brings every hole. The platform itself is left out: once the journal tip is
+Stewart platform brings every hole. The platform's legs are left out: once the journal tip is
 within ``FOLLOW_STOP_ABOVE`` of the entry the episode's platform holds still (it stops
 following the TCP there, tasks/episode_steps.py) and its legs are ~100x stiffer than the arm
-at the tool, so the plate is fixed in the world and what the platform contributes is where
-the hole ends up (a sampled position error). No tray, cameras, lights or other holes: a trial
+at the tool, so the plate stands still in the world then and what the platform contributes is
+where the hole ends up (a sampled position error). Before that moment the platform follows the
+TCP's sideways wander; the plate is a mocap body, so a trial moves it as the platform does
+(kinematically: nothing touches it then). No tray, cameras, lights or other holes: a trial
 steps ~2x faster than the cell at rest (``serpar bench``).
 
 Per trial, the bore and the journal take their drawn diameters: one model per trial compiled
@@ -86,6 +88,7 @@ def build_trial_spec(cfg: TrialSceneConfig, hole: float, journal: float,
     ex, ey, ez = cfg.entry
     spec.attach(build_baseplate_spec([hole], plate, cfg.physics), prefix=names.PLATE,
                 frame=spec.worldbody.add_frame(pos=[ex, ey, ez - plate.thickness]))
+    spec.body(PLATE_BODY).mocap = True  # the platform's part: moved, never pushed
     part = build_conductor_spec(journal, body, cfg.conductor, cfg.physics)
     spec.attach(part, prefix=names.conductor(PART),
                 frame=spec.worldbody.add_frame(pos=[ex, ey, ez + 0.01]))
@@ -112,6 +115,8 @@ class TrialIds:
     shoulder_site: int
     plate_force: slice
     """sensordata of the conductor/plate contact force."""
+    plate_mocap: int
+    """The plate's index in mocap_pos."""
 
     @classmethod
     def of(cls, model: mujoco.MjModel) -> TrialIds:
@@ -127,5 +132,5 @@ class TrialIds:
                    int(model.jnt_qposadr[part.jntadr[0]]), int(part.id),
                    model.site(names.ARM + TCP_SITE).id, model.site(f"{names.PLATE}hole0").id,
                    model.site(f"{prefix}tip").id, model.site(f"{prefix}shoulder").id,
-                   slice(adr, adr + 3))
+                   slice(adr, adr + 3), int(model.body_mocapid[model.body(PLATE_BODY).id]))
 

@@ -33,12 +33,15 @@ from serpar.sim.arm import GRIP_ACTUATOR
 from serpar.sim.arm_drive import ArmIndex
 from serpar.sim.trial_scene import TrialIds
 from serpar.tasks.episode_config import Outcome
+from serpar.tasks.episode_steps import FOLLOW_DEADBAND, FOLLOW_STOP_ABOVE
 from serpar.tasks.hole_cycle import GRASP_SQUEEZE
 from serpar.tasks.insertion import InsertionConfig
 from serpar.tasks.trial_start import TrialStart, write_start
 
 Arr = NDArray[np.float64]
 SETTLE, APPROACH, PUSH, DONE = 0, 1, 2, 3
+FOLLOW_EVERY = 10
+"""Control periods between the platform's corrections (100 Hz, tasks/episode_steps.py)."""
 CONTACT_FORCE_N = 0.05
 """A period-mean plate force above this is first contact (tasks/insertion.py)."""
 
@@ -49,6 +52,10 @@ class TrialConfig:
     settle_s: float = 0.15
     """Squeeze and hold before the approach: the pads' grip builds up and the wrench estimate
     has its tare window (0.1 s) of contact-free readings."""
+    follow_stop_above: float = FOLLOW_STOP_ABOVE
+    """The platform follows the TCP's sideways wander until the measured tip is this far above
+    the believed entry, every 10 periods past a 2 um dead band, as the episode's
+    (tasks/episode_steps.py HoleUnderJournal)."""
     law: ControlLaw = ControlLaw.FORCE_POSITION
     controller: ArmControllerConfig = field(default_factory=lambda: controller_config(True))
     squeeze_n: float = GRASP_SQUEEZE
@@ -96,6 +103,10 @@ class _Slots:
     t_contact: Arr = field(init=False)
     lateral: Arr = field(init=False)
     fault: list[str] = field(init=False)
+    calls: NDArray[np.int64] = field(init=False)
+    """Approach periods so far (the platform acts every FOLLOW_EVERY)."""
+    shift: Arr = field(init=False)
+    """Where the platform last put the hole, against its start [m]."""
 
     def __post_init__(self) -> None:
         n = self.n
@@ -105,6 +116,7 @@ class _Slots:
         self.start, self.held = np.zeros((n, 3)), np.zeros((n, 3))
         self.peak, self.t_contact, self.lateral = np.zeros(n), np.full(n, np.nan), np.full(n, np.nan)
         self.fault = [""] * n
+        self.calls, self.shift = np.zeros(n, dtype=np.int64), np.zeros((n, 3))
 
 
 def _in_hole_frame(xpos: Arr, xmat: Arr, site: int, hole: int) -> Arr:
@@ -150,14 +162,17 @@ def run_trials(trials: Sequence[Trial], chamfer: float, cfg: TrialConfig = Trial
     window = round(ins.stall_s / dt) + 1
     ring, nring = np.zeros((n, window)), np.zeros(n, dtype=np.int64)
     ctl.track(np.stack([st.start for st in starts]), rot)
-    ctl.set_posture(np.stack([st.q for st in starts]))
     batch.forward()
     tau = batch.bind("sensordata")[:, arm.torque_adr].copy()
     force_adr = np.arange(ids.plate_force.start, ids.plate_force.stop)
     control = np.zeros((n, substeps, model.nu))
+    mocap = batch.bind("mocap_pos")
+    plate0 = mocap[:, ids.plate_mocap].copy()
+    stop_after = np.array([st.height for st in starts]) - cfg.follow_stop_above
     while (active := np.flatnonzero(s.phase != DONE)).size:
         q, dq = qpos[:, arm.qpos].copy(), qvel[:, arm.dof].copy()
         _targets(ctl, s, active, rot, axis, goal, ins, dt)
+        _follow(ctl, s, active, axis, mocap, ids.plate_mocap, plate0, stop_after)
         held_cmd = ctrl[:, arm.actuators].copy()
         new = ctl.update(q, dq, tau)
         control[:, :, :] = ctrl[:, None, :]
@@ -221,6 +236,26 @@ def _targets(ctl: BatchArmController, s: _Slots, active: NDArray[np.intp], rot: 
             ins.force_n - ins.contact_n) * since / max(ins.force_ramp_s, 1e-12))
         ctl.track(s.held[p], rot[p], law=ControlLaw.FORCE_POSITION, force_axis=axis[p], force=ramp,
                   ids=p)
+
+
+def _follow(ctl: BatchArmController, s: _Slots, active: NDArray[np.intp], axis: Arr, mocap: Arr,
+            plate: int, plate0: Arr, stop_after: Arr) -> None:
+    """The platform keeps the hole under the measured TCP during the approach (only sideways,
+    only until the tip is ``follow_stop_above`` over the entry): the episode's HoleUnderJournal,
+    with the plate moved where its legs would put it."""
+    a = active[s.phase[active] == APPROACH]
+    if not a.size:
+        return
+    s.calls[a] += 1
+    a = a[s.calls[a] % FOLLOW_EVERY == 0]
+    pos, _ = ctl.nominal.tcp_pose()
+    shift = pos[a] - s.start[a]
+    travelled = np.einsum("ni,ni->n", shift, axis[a])
+    shift -= travelled[:, None] * axis[a]
+    moved = (travelled <= stop_after[a]) & (np.linalg.norm(shift - s.shift[a], axis=1) >= FOLLOW_DEADBAND)
+    a, shift = a[moved], shift[moved]
+    s.shift[a] = shift
+    mocap[a, plate] = plate0[a] + shift
 
 
 def _score(batch: mujoco.batch.Batch, s: _Slots, active: NDArray[np.intp], force: Arr,
@@ -288,7 +323,7 @@ def _classify(batch: mujoco.batch.Batch, s: _Slots, ids: TrialIds, ins: Insertio
             outcome, reason = Outcome.SUCCESS, "seated"
         elif s.timed_out[i]:
             outcome, reason = Outcome.TIMEOUT, f"not seated after {ins.time_limit_s:g} s"
-        elif tip_depth[i] <= s.bore_start or tip_off[i] > s.mouth_radius:
+        elif tip_depth[i] <= s.bore_start or tip_off[i] > s.mouth_radius[i]:
             outcome, reason = Outcome.ALIGN_FAIL, f"tip on the rim or chamfer, {lateral:.3f} mm off axis"
         else:
             outcome, reason = Outcome.JAM, f"stuck {short * 1e3:.3f} mm short of seated"

@@ -1,8 +1,8 @@
 """Where an insertion trial starts: one trial's sampled errors turned into the cell's state.
 
-A trial is step 6 of the hole cycle from the moment the Stewart platform stops following the
-journal (tip ``FOLLOW_STOP_ABOVE`` above the hole entry as vision placed it). What the cell got
-wrong before that moment is in the draw: how the part really sits in the grip, what the in-hand
+A trial is step 6 of the hole cycle from the hover, as the episode's insertion starts (the
+measured tip ``HOVER_TIP`` above the hole entry as the cell believes it). What the cell got
+wrong before then is in the draw: how the part really sits in the grip, what the in-hand
 vision measured instead, and where the hole really is against where the cell put it. As in the
 episode, the cell aligns what it *believes* (the measured journal over the believed entry); the
 physics sees the truth. The plate is fixed with the hole axis vertical, so the hand turns to
@@ -20,13 +20,17 @@ from numpy.typing import NDArray
 
 from serpar.errors import ConfigError
 from serpar.kinematics.rotations import so3_exp
+from serpar.sim.arm import HOME_Q
+from serpar.sim.conductor import ConductorConfig
 from serpar.sim.poses import GRASP_HEIGHT, solve_site_pose
 from serpar.sim.trial_scene import TrialIds
-from serpar.tasks.episode_steps import FOLLOW_STOP_ABOVE
-from serpar.tasks.hole_cycle import HAND_DOWN
+from serpar.tasks.hole_cycle import HAND_DOWN, HOVER
 
 Vec = NDArray[np.float64]
 UP = np.array([0.0, 0.0, 1.0])
+HOVER_TIP = HOVER - ConductorConfig().journal_length
+"""The journal tip above the hole entry at the hover, where the episode's insertion starts [m]
+(the shoulder HOVER above it)."""
 FLIP = np.diag([1.0, -1.0, -1.0])
 """A conductor's frame in the TCP frame at the nominal grasp: x along the TCP x, z (shoulder to
 body) against the TCP z."""
@@ -81,6 +85,8 @@ class TrialStart:
     """The conductor's true pose (shoulder; MuJoCo quaternion)."""
     finger: float
     """Each finger's opening: the pads just touching the part's body [m]."""
+    height: float
+    """The measured tip above the believed entry at ``start`` [m]."""
 
 
 def _tilted(tilt: tuple[float, float]) -> Vec:
@@ -96,7 +102,7 @@ def _aligning(a: Vec, b: Vec) -> Vec:
     return so3_exp(axis / s * np.arctan2(s, float(a @ b)))
 
 
-def trial_start(draw: TrialDraw, entry: Vec, journal_length: float, height: float = FOLLOW_STOP_ABOVE,
+def trial_start(draw: TrialDraw, entry: Vec, journal_length: float, height: float = HOVER_TIP,
                 ) -> tuple[Vec, Vec, Vec, Vec, Vec, Vec]:
     """(rot, start, seat, axis, part_pos, part_rot) of a trial, before the arm's joint angles."""
     grip = so3_exp(np.array([0.0, draw.grasp_tilt, 0.0]))  # the part's lean in the TCP frame
@@ -115,15 +121,16 @@ def trial_start(draw: TrialDraw, entry: Vec, journal_length: float, height: floa
 
 
 def plan_start(model: mujoco.MjModel, ids: TrialIds, draw: TrialDraw, entry: Vec,
-               journal_length: float, q_guess: Vec, height: float = FOLLOW_STOP_ABOVE) -> TrialStart:
-    """A trial's start: the arm's joint angles (inverse kinematics seeded by ``q_guess``) and
-    where the part sits."""
+               journal_length: float, q_guess: Vec, height: float = HOVER_TIP) -> TrialStart:
+    """A trial's start: the arm's joint angles (inverse kinematics seeded by ``q_guess``, its
+    elbow where the controllers' posture task, pulling toward HOME_Q, leaves it) and where the
+    part sits."""
     rot, start, seat, axis, part_pos, part_rot = trial_start(draw, entry, journal_length, height)
     q = solve_site_pose(model, model.qpos0, ids.arm_qpos, ids.tcp_site, start, rotation=rot,
-                        q_start=q_guess)
+                        q_start=q_guess, rest=np.asarray(HOME_Q))
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, np.ascontiguousarray(part_rot).ravel())
-    return TrialStart(q, rot, start, seat, axis, part_pos, quat, draw.body_diameter / 2)
+    return TrialStart(q, rot, start, seat, axis, part_pos, quat, draw.body_diameter / 2, height)
 
 
 def write_start(qpos: Vec, ids: TrialIds, start: TrialStart) -> None:

@@ -15,6 +15,7 @@ import pytest
 from serpar.checks.bench_montecarlo import montecarlo_bench
 from serpar.checks.montecarlo import run_montecarlo, scene_config, trial_config
 from serpar.checks.montecarlo_config import MonteCarloConfig, draw_trial
+from serpar.checks.montecarlo_validation import validate
 from serpar.cli.entry import main
 from serpar.controllers.batch_sensors import trial_seeds
 from serpar.errors import ConfigError
@@ -130,3 +131,13 @@ def test_the_bench_times_trials_against_bare_batched_stepping() -> None:
     one = report["by_threads"]["1"]
     assert one["trials_per_s"] > 0 and one["bare_steps_per_s"] > 0
     assert np.isfinite(one["overhead"]) and report["scaling"]["1"] == 1.0
+
+
+@pytest.mark.slow
+def test_a_trial_from_an_episodes_insertion_start_reproduces_it() -> None:
+    """An episode's insertions (seed 0, holes 0 and 1), replayed as trials from the state each
+    started in: the same outcome, the peak force within 5 %."""
+    report = validate(2, seed=0)
+    assert report["insertions"] == 2
+    assert report["same_outcome"] == 2
+    assert report["peak_within_5pct"] == 2
