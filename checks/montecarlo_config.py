@@ -57,7 +57,7 @@ class MonteCarloConfig:
     start_height_mm: float = 2.5
     """Measured tip above the believed hole entry at the start: the hover, where the episode's
     insertion starts (the platform then follows the TCP down to 0.3 mm above the entry)."""
-    time_limit_s: float = 2.0
+    time_limit_s: float = 3.0
     """Simulated time a trial may take from its start; beyond it the trial is a timeout."""
     force_n: float = 5.0
     """The push F_d along the hole axis [N] (the episode's)."""
