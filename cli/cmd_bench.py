@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from serpar.checks.bench import BenchConfig, run_bench
 from serpar.checks.bench_episode import against_goals, episode_bench
+from serpar.checks.bench_montecarlo import montecarlo_bench
 from serpar.cli.output import print_json, progress, table
 
 
@@ -20,6 +22,10 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="also time the assembly task: one hole cycle, the 36-hole episode (estimated "
                         "from it) and 2 workers vs 1 (adds ~1 min); each figure is printed beside "
                         "its goal")
+    p.add_argument("--montecarlo", action="store_true",
+                   help="also time serpar montecarlo: one batch of 32 insertion trials at 1 thread "
+                        "and at every core, trials/s, the scaling and the overhead over bare batched "
+                        "stepping (adds ~2 min)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_bench)
     return p
@@ -27,7 +33,9 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     cfg = BenchConfig(sim_seconds=args.seconds, repeats=args.repeats)
-    bar = progress(5 + 3 * args.episode, "bench", enabled=sys.stderr.isatty())
+    threads = tuple(sorted({1, os.cpu_count() or 1}))
+    bar = progress(5 + 3 * args.episode + len(threads) * args.montecarlo, "bench",
+                   enabled=sys.stderr.isatty())
 
     def tick(name: str) -> None:
         bar.set_postfix_str(name)
@@ -37,6 +45,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.episode:
 
         report["episode"] = episode_bench(tick=tick)
+    if args.montecarlo:
+        report["montecarlo"] = montecarlo_bench(threads=threads, tick=tick)
     bar.close()
     report["goals"] = against_goals(report)
     if args.json:
@@ -65,6 +75,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
             ["36-hole episode, estimated", f"{e['episode_36_holes_estimated_wall_s']:.0f}", "", ""],
             ["2 one-hole episodes, 1 worker", f"{w['workers_1_s']:.1f}", "", ""],
             ["2 one-hole episodes, 2 workers", f"{w['workers_2_s']:.1f}", "", f"speed-up {w['speedup']:.2f}x"]]))
+    if args.montecarlo:
+        mc = report["montecarlo"]
+        print(table([f"montecarlo, {mc['trials']} trials", "wall s", "trials/s", "steps/s", "bare steps/s",
+                     "loop / bare", "scaling"],
+                    [[f"{n} thread(s)", f"{r['wall_s']:.1f}", f"{r['trials_per_s']:.2f}",
+                      f"{r['steps_per_s']:,.0f}", f"{r['bare_steps_per_s']:,.0f}", f"{r['overhead']:.2f}x",
+                      f"{mc['scaling'][n]:.2f}x"] for n, r in mc["by_threads"].items()]))
     goals = report["goals"]
     print(table(["figure", "measured", "goal", ""],
                 [[g["label"], f"{g['value']:.2f}", g["goal"], "met" if g["met"] else "SHORT"] for g in goals.values()]))

@@ -18,6 +18,7 @@ from serpar.cli import (
     cmd_error_analysis,
     cmd_export_mjcf,
     cmd_import,
+    cmd_montecarlo,
     cmd_replay,
     cmd_run,
     cmd_sim2real,
@@ -195,6 +196,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmd_twin.register(sub)
     cmd_blind_bench.register(sub)
     cmd_import.register(sub)
+    cmd_montecarlo.register(sub)
     # the commands by their own names (aliases such as import-csv stay in the list below)
     sub.metavar = "{" + ",".join(a.dest for a in sub._choices_actions) + "}"
     return parser

@@ -1,181 +1,184 @@
-"""The thin stateful wrapper: sensors -> nominal model -> wrench estimate -> law -> torques.
+"""One arm in a compiled plant model: :class:`BatchArmController` at N = 1.
 
-It holds only what the pure laws cannot: the sensor model's drifting bias, the wrench
-filter, the force-loop reference offset and the saturation record. Runs at
-``rate_hz`` over the physics substeps (1 kHz over 0.1 ms steps = 10 substeps).
+The controller exists once, over a batch axis (controllers/batch_*.py); the episode runs it with
+a batch of one. This adapter samples the plant's sensors from its MjData, writes ``data.ctrl``,
+and keeps one arm's interface: CartesianTarget / ForceTarget objects, (7,) arrays, floats. It
+runs at ``rate_hz`` over the physics substeps (1 kHz over 0.1 ms steps = 10 substeps).
 """
 
 from __future__ import annotations
-
-import enum
-from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from serpar.controllers.arm_laws import (
-    CartesianTarget,
-    ForcePositionGains,
-    ForceTarget,
-    ImpedanceGains,
-    JointGains,
-    force_position_torque,
-    impedance_torque,
-    joint_pd_torque,
-    next_force_offset,
-)
+from serpar.controllers.arm_config import ArmControllerConfig, ControlLaw, controller_config
+from serpar.controllers.arm_laws import CartesianTarget, ForceTarget
 from serpar.controllers.arm_model import NominalArm, require_joint_target
-from serpar.controllers.arm_sensors import ArmMeasurement, ArmSensorConfig, ArmSensors
-from serpar.controllers.wrench import WrenchEstimator, WrenchEstimatorConfig
+from serpar.controllers.arm_sensors import ArmMeasurement
+from serpar.controllers.batch_controller import BatchArmController, BatchSaturationRecord
+from serpar.controllers.batch_laws import LAWS
+from serpar.controllers.batch_sensors import BatchArmSensors, Seed
 from serpar.errors import ConfigError
-from serpar.sim.arm import TORQUE_LIMITS
-from serpar.sim.arm_drive import ArmIndex, saturate_torque
+from serpar.sim.arm import HOME_Q
+from serpar.sim.arm_drive import ArmIndex
+
+__all__ = ["ArmController", "ArmControllerConfig", "ArmSensors", "ControlLaw",
+           "SaturationRecord", "controller_config"]
 
 Vec = NDArray[np.float64]
+_DEFAULT_CONFIG = ArmControllerConfig()
 
 
-class ControlLaw(enum.Enum):
-    JOINT_PD = "joint_pd"
-    IMPEDANCE = "impedance"
-    FORCE_POSITION = "force_position"
+def _strided(index: NDArray[np.int64]) -> slice | NDArray[np.int64]:
+    """`index` as a slice when evenly spaced (the plant's torque sensors are every third
+    sensordata entry): a view per period instead of a gather."""
+    index = np.asarray(index)
+    step = int(index[1] - index[0]) if len(index) > 1 else 1
+    if step > 0 and np.array_equal(index, index[0] + step * np.arange(len(index))):
+        return slice(int(index[0]), int(index[-1]) + 1, step)
+    return index
 
 
-@dataclass(frozen=True)
-class ArmControllerConfig:
-    rate_hz: float = 1000.0
-    """Control rate (the Panda's 1 kHz torque interface)."""
-    sensors: ArmSensorConfig = field(default_factory=ArmSensorConfig)
-    wrench: WrenchEstimatorConfig = field(default_factory=WrenchEstimatorConfig)
-    joint: JointGains = field(default_factory=JointGains)
-    impedance: ImpedanceGains = field(default_factory=ImpedanceGains)
-    force_position: ForcePositionGains = field(default_factory=ForcePositionGains)
+class ArmSensors:
+    """The arm's sensors in a plant MjData, read through the batch sensor model at N = 1."""
 
-    def __post_init__(self) -> None:
-        if not self.rate_hz > 0:
-            raise ConfigError(f"rate_hz={self.rate_hz} must be > 0")
+    def __init__(self, index: ArmIndex, sensors: BatchArmSensors) -> None:
+        if sensors.n != 1:
+            raise ConfigError(f"ArmSensors reads one arm, got a batch of {sensors.n}")
+        self.index, self.batch, self.config = index, sensors, sensors.config
+        self._qpos, self._dof, self._torque = (_strided(index.qpos), _strided(index.dof),
+                                                    _strided(index.torque_adr))
+        self._latched: Vec | None = None
 
-    def substeps(self, timestep: float) -> int:
-        """Physics steps per control period; the period must be a whole number of steps."""
-        n = round(1.0 / (self.rate_hz * timestep))
-        if n < 1 or abs(n * timestep * self.rate_hz - 1.0) > 1e-9:
-            raise ConfigError(f"rate_hz={self.rate_hz} is not a whole number of {timestep} s "
-                              f"physics steps; valid e.g. {1 / (10 * timestep):g} or "
-                              f"{1 / (20 * timestep):g}")
-        return n
+    @property
+    def bias(self) -> Vec:
+        """The torque sensors' drifting bias now [N m]."""
+        return self.batch.bias[0]
+
+    def latch(self, torque: Vec) -> None:
+        """The torque sensors' reading for the next read (the mean over the control period that
+        just ended, from :class:`TorqueADC`); without it a read samples the torque MuJoCo
+        computed at the start of the last physics substep."""
+        self._latched = torque
+
+    def sample(self, data: mujoco.MjData) -> tuple[Vec, Vec, Vec]:
+        """The true (1, 7) q, dq and torque reading the sensor model reads (views, no copies)."""
+        raw, self._latched = (data.sensordata[self._torque] if self._latched is None
+                              else self._latched), None
+        return data.qpos[None, self._qpos], data.qvel[None, self._dof], np.asarray(raw)[None]
+
+    def read(self, model: mujoco.MjModel, data: mujoco.MjData, dt: float) -> ArmMeasurement:
+        """Sample the sensors of the plant `data`; `dt` is the time since the last read."""
+        meas = self.batch.read(*self.sample(data), dt)
+        return ArmMeasurement(meas.q[0], meas.dq[0], meas.tau_J[0])
 
 
-@dataclass
 class SaturationRecord:
-    """Torque saturation is reported, never silent: count and worst request per joint."""
+    """One arm's torque saturation: periods with any joint saturated, worst request per joint."""
 
-    periods: int = 0
-    worst_ratio: NDArray[np.float64] = field(default_factory=lambda: np.zeros(7))
+    def __init__(self, record: BatchSaturationRecord) -> None:
+        self.record = record
 
-    def note(self, tau: Vec, limits: Vec, saturated: NDArray[np.bool_]) -> None:
-        if saturated.any():
-            self.periods += 1
-        np.maximum(self.worst_ratio, np.abs(tau) / limits, out=self.worst_ratio)
+    @property
+    def periods(self) -> int:
+        return int(self.record.periods[0])
+
+    @property
+    def worst_ratio(self) -> Vec:
+        return self.record.worst_ratio[0]
 
     def summary(self) -> str:
-        if self.periods == 0:
-            return "no torque saturation"
-        j = int(np.argmax(self.worst_ratio))
-        return (f"torque saturated in {self.periods} control periods; worst joint{j + 1} asked "
-                f"{self.worst_ratio[j]:.2f}x its limit")
+        return self.record.summary(0)
 
 
 class ArmController:
-    """One arm in a compiled plant model (prefix e.g. "arm/")."""
+    """One arm in a compiled plant model (prefix e.g. "arm/"); its sensor noise is the stream
+    ``np.random.default_rng(seed)`` draws."""
 
     def __init__(self, model: mujoco.MjModel, prefix: str = "",
-                 config: ArmControllerConfig = ArmControllerConfig(), seed: int = 0) -> None:
+                 config: ArmControllerConfig = _DEFAULT_CONFIG, seed: Seed = 0) -> None:
         self.config = config
         self.index = ArmIndex.from_model(model, prefix)
-        self.substeps = config.substeps(model.opt.timestep)
-        self.dt = self.substeps * model.opt.timestep
-        self.nominal = NominalArm()
-        self.sensors = ArmSensors(self.index, config.sensors, seed)
-        self.estimator = WrenchEstimator(config.wrench)
-        self.saturation = SaturationRecord()
-        self._limits = np.asarray(TORQUE_LIMITS)
-        self.law = ControlLaw.JOINT_PD
-        self.q_target: Vec | None = None
-        self.dq_target = np.zeros(7)
+        self.batch = BatchArmController(1, model.opt.timestep, config, seeds=[seed])
+        self.substeps = self.batch.substeps
+        """Physics steps per period; the cell runtime changes it with the timestep."""
+        self.dt = self.batch.dt
+        self.nominal = NominalArm(batch=self.batch.nominal)
+        self.sensors = ArmSensors(self.index, self.batch.sensors)
+        self.saturation = SaturationRecord(self.batch.saturation)
         self.cart_target: CartesianTarget | None = None
         self.force_target: ForceTarget | None = None
-        self.force_offset = 0.0
-        self.q_posture: Vec | None = None
-        self.measurement: ArmMeasurement | None = None
-        self.tau = np.zeros(7)
+        self._q_posture: Vec | None = None
+        self._actuators = _strided(self.index.actuators)
 
     # --- targets ---------------------------------------------------------------------------
     def hold_joints(self, q: Vec, dq: Vec | None = None) -> None:
-        self.law = ControlLaw.JOINT_PD
-        self.q_target = require_joint_target(q)
-        self.dq_target = np.zeros(7) if dq is None else np.asarray(dq, dtype=float)
+        self.batch.hold_joints(require_joint_target(q), None if dq is None else np.asarray(dq, float))
 
     def track(self, target: CartesianTarget, law: ControlLaw = ControlLaw.IMPEDANCE,
               force: ForceTarget | None = None) -> None:
         """Cartesian target for the impedance or force-position law (force: along an axis)."""
-        if law is ControlLaw.JOINT_PD:
-            raise ConfigError("track() takes impedance or force_position; use hold_joints() for "
-                              "joint_pd")
         if law is ControlLaw.FORCE_POSITION and force is None:
             raise ConfigError("force_position needs a ForceTarget (axis, newtons)")
-        if self.law is not law or self.force_target is None:
-            self.force_offset = 0.0  # a new force task starts from the position reference
-        self.law, self.cart_target, self.force_target = law, target, force
+        if force is None:
+            self.batch.track(target.pos, target.rot, target.vel, target.acc, law)
+        else:
+            self.batch.track(target.pos, target.rot, target.vel, target.acc, law, force.axis,
+                             force.force, unit_axis=True)
+        self.cart_target, self.force_target = target, force
+
+    @property
+    def law(self) -> ControlLaw:
+        return LAWS[self.batch.law[0]]
+
+    @property
+    def q_posture(self) -> Vec | None:
+        """Nullspace posture target of the Cartesian laws (None: HOME_Q)."""
+        return self._q_posture
+
+    @q_posture.setter
+    def q_posture(self, q: Vec | None) -> None:
+        self._q_posture = q
+        self.batch.set_posture(HOME_Q if q is None else q)
+
+    @property
+    def force_offset(self) -> float:
+        """The force-position reference's offset along the force axis [m]."""
+        return float(self.batch.force_offset[0])
 
     def tare(self) -> None:
         """Zero the wrench estimate (TCP free of contact)."""
-        self.estimator.tare()
+        self.batch.tare()
 
     @property
     def wrench(self) -> Vec:
         """Estimated wrench the environment applies at the TCP (force, torque)."""
-        return self.estimator.wrench
+        return self.batch.wrench[0]
 
     def measured_push(self) -> float:
         """F_s along the force axis: what the robot pushes on the environment with [N]."""
-        axis = self.force_target.axis if self.force_target is not None else np.array([0, 0, -1.0])
-        return float(-axis @ self.wrench[:3])
+        return float(self.batch.measured_push()[0])
+
+    @property
+    def measurement(self) -> ArmMeasurement | None:
+        """The last update's sensor readings."""
+        meas = self.batch.measurement
+        return None if meas is None else ArmMeasurement(meas.q[0], meas.dq[0], meas.tau_J[0])
+
+    @property
+    def tau(self) -> Vec:
+        """The last update's saturated torques [N m]."""
+        return self.batch.tau[0]
 
     # --- the 1 kHz update ------------------------------------------------------------------
     def update(self, model: mujoco.MjModel, data: mujoco.MjData) -> Vec:
         """Read sensors, compute the law's torques, saturate, write data.ctrl; returns tau."""
-        meas = self.sensors.read(model, data, self.dt)
-        self.measurement = meas
-        self.nominal.load(meas.q, meas.dq)
-        self.estimator.update(self.nominal, meas.tau_J, self.dt)
-        if self.law is ControlLaw.JOINT_PD:
-            if self.q_target is None:
-                self.q_target = meas.q.copy()
-            tau = joint_pd_torque(self.nominal, self.q_target, self.dq_target, self.config.joint)
-        elif self.law is ControlLaw.IMPEDANCE:
-            ff = None
-            if self.force_target is not None:  # Eq. 3's F_d: fed forward, never fed back
-                ff = np.concatenate([self.force_target.force * self.force_target.axis, np.zeros(3)])
-            tau = impedance_torque(self.nominal, self.cart_target, self.config.impedance, ff,
-                                   self.q_posture)
-        else:
-            push = self.measured_push()
-            tau = force_position_torque(self.nominal, self.cart_target, self.config.force_position,
-                                        self.force_target, push, self.force_offset, self.q_posture)
-            self.force_offset = next_force_offset(self.force_offset, self.force_target, push,
-                                                  self.config.force_position, self.dt)
-        tau_sat, saturated = saturate_torque(tau)
-        self.saturation.note(tau, self._limits, saturated)
-        self.tau = tau_sat
-        data.ctrl[self.index.actuators] = tau_sat
-        return tau_sat
+        tau = self.batch.update(*self.sensors.sample(data))[0]
+        data.ctrl[self._actuators] = tau
+        return tau
 
     def step(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         """One control period: update, then the physics substeps."""
         self.update(model, data)
         mujoco.mj_step(model, data, nstep=self.substeps)
-
-
-def controller_config(noise: bool) -> ArmControllerConfig:
-    """The cell's arm controller: with the Panda's sensor noise, or with ideal sensors."""
-    return ArmControllerConfig(sensors=ArmSensorConfig() if noise else ArmSensorConfig.ideal())

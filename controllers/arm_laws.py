@@ -1,8 +1,9 @@
-"""Arm control laws as pure functions of (nominal model at the measured state, target, gains).
+"""What the arm control laws take besides the model: their gains and targets, and the TCP
+orientation error by MuJoCo's own quaternion functions.
 
-Every law returns joint torques including the model's gravity and Coriolis terms; the
-caller saturates them. Cartesian quantities live in the arm base frame; twists and
-wrenches are (linear, angular) with torques about the TCP.
+The laws themselves are pure functions over a leading batch axis in
+:mod:`serpar.controllers.batch_laws` (one arm is a batch of one). Cartesian quantities live in
+the arm base frame; twists and wrenches are (linear, angular) with torques about the TCP.
 """
 
 from __future__ import annotations
@@ -14,11 +15,15 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from serpar.controllers.arm_model import NominalArm
 from serpar.errors import ConfigError
-from serpar.sim.arm import HOME_Q, N_JOINTS
+from serpar.sim.arm import N_JOINTS
 
 Vec = NDArray[np.float64]
+
+
+def _as_array(field: str) -> cached_property[Vec]:
+    """The tuple gain `field` as a float array, made once per instance (read every period)."""
+    return cached_property(lambda self: np.asarray(getattr(self, field), dtype=float))
 
 
 def _positive(name: str, values: tuple[float, ...], n: int, strict: bool = False) -> None:
@@ -39,6 +44,9 @@ class JointGains:
         _positive("kp", self.kp, N_JOINTS, strict=True)
         _positive("kd", self.kd, N_JOINTS)
 
+    kp_array = _as_array("kp")
+    kd_array = _as_array("kd")
+
 
 @dataclass(frozen=True)
 class ImpedanceGains:
@@ -58,13 +66,8 @@ class ImpedanceGains:
         _positive("damping", self.damping, 6)
         _positive("nullspace gains", (self.nullspace_stiffness, self.nullspace_damping), 2)
 
-    @cached_property
-    def stiffness_array(self) -> Vec:
-        return np.asarray(self.stiffness, dtype=float)
-
-    @cached_property
-    def damping_array(self) -> Vec:
-        return np.asarray(self.damping, dtype=float)
+    stiffness_array = _as_array("stiffness")
+    damping_array = _as_array("damping")
 
 
 @dataclass(frozen=True)
@@ -122,73 +125,15 @@ class ForceTarget:
             raise ConfigError(f"force axis must be a unit vector, got norm {n:.6g}")
 
 
-def orientation_error(rot: Vec, target_rot: Vec) -> Vec:
-    """Rotation vector taking rot to target_rot, in the base frame [rad]."""
-    quat_err, q1, q2 = np.zeros(4), np.zeros(4), np.zeros(4)
+def orientation_error(rot: Vec, target_rot: Vec, out: Vec | None = None) -> Vec:
+    """Rotation vector taking rot to target_rot, in the base frame [rad] (into `out` if given):
+    mju_mat2Quat, mju_negQuat, mju_mulQuat, mju_quat2Vel (the reference batch_laws' row-wise
+    copy is tested against, and what it runs for a few rows)."""
+    quat_err, q1, q2 = np.empty(4), np.empty(4), np.empty(4)  # each written whole
     mujoco.mju_mat2Quat(q1, np.ascontiguousarray(rot).ravel())
     mujoco.mju_mat2Quat(q2, np.ascontiguousarray(target_rot).ravel())
     mujoco.mju_negQuat(q1, q1)
     mujoco.mju_mulQuat(quat_err, q2, q1)
-    out = np.zeros(3)
+    out = np.empty(3) if out is None else out
     mujoco.mju_quat2Vel(out, quat_err, 1.0)
     return out
-
-
-def pose_error(nominal: NominalArm, target: CartesianTarget) -> Vec:
-    pos, rot = nominal.tcp_pose()
-    return np.concatenate([target.pos - pos, orientation_error(rot, target.rot)])
-
-
-def joint_pd_torque(nominal: NominalArm, q_target: Vec, dq_target: Vec, gains: JointGains) -> Vec:
-    """tau = Kp (q* - q) + Kd (dq* - dq) + c + g."""
-    q, dq = nominal.data.qpos[nominal.index.qpos], nominal.data.qvel[nominal.index.dof]
-    return np.asarray(gains.kp) * (q_target - q) + np.asarray(gains.kd) * (dq_target - dq) + nominal.bias()
-
-
-def impedance_torque(nominal: NominalArm, target: CartesianTarget, gains: ImpedanceGains,
-                     force_ff: Vec | None = None, q_posture: Vec | None = None) -> Vec:
-    """Seed Eq. 3: tau = J^T (F_d + Lambda acc* + K_d dx + D_d dv) + c + g + nullspace posture."""
-    idx = nominal.index
-    q, dq = nominal.data.qpos[idx.qpos], nominal.data.qvel[idx.dof]
-    jac = nominal.tcp_jacobian()
-    minv_jt = np.linalg.solve(nominal.mass(), jac.T)
-    lam = np.linalg.inv(jac @ minv_jt)
-    # acc* - Jdot dq: the Cartesian acceleration the joint accelerations must add.
-    acc = target.acc - nominal.tcp_jacobian_dot() @ dq
-    wrench = (lam @ acc + gains.stiffness_array * pose_error(nominal, target)
-              + gains.damping_array * (target.vel - jac @ dq))
-    if force_ff is not None:
-        wrench = wrench + force_ff
-    posture = HOME_Q if q_posture is None else q_posture
-    tau_null = gains.nullspace_stiffness * (posture - q) - gains.nullspace_damping * dq
-    # Dynamically consistent projection (I - J^T Lambda J M^-1) tau_null, as vectors: the
-    # posture torque cannot disturb the TCP.
-    wrench = wrench - lam @ (minv_jt.T @ tau_null)
-    return jac.T @ wrench + tau_null + nominal.bias()
-
-
-def force_position_torque(nominal: NominalArm, target: CartesianTarget, gains: ForcePositionGains,
-                          force: ForceTarget, measured_force: float, offset: float,
-                          q_posture: Vec | None = None) -> Vec:
-    """Fig. 4: impedance about target shifted by `offset` along the axis, plus
-    (F_d + k_f (F_d - F_s)) along the axis, less the speed limit's brake; measured_force is F_s
-    along the axis."""
-    shifted = CartesianTarget(target.pos + offset * force.axis, target.rot, target.vel, target.acc)
-    push = force.force + gains.force_feedback * (force.force - measured_force)
-    # The limit is on speed beyond the reference's own (a commanded move along the axis is not
-    # braked; a push into a hole from a held pose is).
-    velocity = nominal.tcp_jacobian()[:3] @ nominal.data.qvel[nominal.index.dof]
-    excess = float(force.axis @ (velocity - target.vel[:3])) - gains.max_speed
-    push -= gains.speed_damping * max(0.0, excess)
-    ff = np.concatenate([push * force.axis, np.zeros(3)])
-    return impedance_torque(nominal, shifted, gains.impedance, ff, q_posture)
-
-
-def next_force_offset(offset: float, force: ForceTarget, measured_force: float,
-                      gains: ForcePositionGains, dt: float) -> float:
-    """Integrate the reference offset: d(offset)/dt = admittance (F_d - F_s), clamped; toward
-    the push no faster than the speed limit, else the reference winds up ahead of a braked TCP
-    and the stored spring force overshoots the target on contact."""
-    rate = np.clip(gains.admittance * (force.force - measured_force), -gains.max_offset_rate,
-                   min(gains.max_offset_rate, gains.max_speed))
-    return float(np.clip(offset + rate * dt, -gains.max_offset, gains.max_offset))

@@ -1,4 +1,7 @@
 """What the real arm measures: encoder angles, joint velocities and link-side joint torques.
+The noise model itself runs over a batch axis (controllers/batch_sensors.py; one arm reads it at
+N = 1 through ``serpar.controllers.arm_controller.ArmSensors``); here its configuration, one
+arm's measurement and the torque sensors' integrating ADC.
 
 Defaults (documented in assets/arm/README.md, "Sensors"):
 - joint torque sensors: white noise sigma 0.02 N m, a constant bias drawn with sigma
@@ -17,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from serpar.errors import ConfigError
-from serpar.sim.arm_drive import ArmIndex, quantise
+from serpar.sim.arm_drive import ArmIndex
 
 Vec = NDArray[np.float64]
 
@@ -58,39 +61,6 @@ class ArmMeasurement:
     q: Vec
     dq: Vec
     tau_J: Vec
-
-
-class ArmSensors:
-    """Stateful sensor model (the bias drifts); one instance per simulated arm."""
-
-    def __init__(self, index: ArmIndex, config: ArmSensorConfig = ArmSensorConfig(),
-                 seed: int = 0) -> None:
-        self.index, self.config = index, config
-        self._rng = np.random.default_rng(seed)
-        self.bias = self._rng.normal(0.0, config.torque_bias_std, len(index.dof))
-        self._latched: Vec | None = None
-
-    def latch(self, torque: Vec) -> None:
-        """The torque sensors' reading for the next :meth:`read` (the mean over the control
-        period that just ended, from :class:`TorqueADC`); without it a read samples the torque
-        MuJoCo computed at the start of the last physics substep."""
-        self._latched = torque
-
-    def read(self, model: mujoco.MjModel, data: mujoco.MjData, dt: float) -> ArmMeasurement:
-        """Sample the sensors of the plant `data`; `dt` is the time since the last read."""
-        cfg, idx, rng = self.config, self.index, self._rng
-        n = len(idx.dof)
-        if cfg.torque_bias_walk > 0:
-            self.bias += rng.normal(0.0, cfg.torque_bias_walk * np.sqrt(dt), n)
-        raw, self._latched = (data.sensordata[idx.torque_adr] if self._latched is None
-                              else self._latched), None
-        tau = raw + self.bias
-        if cfg.torque_noise_std > 0:
-            tau = tau + rng.normal(0.0, cfg.torque_noise_std, n)
-        dq = data.qvel[idx.dof].copy()
-        if cfg.velocity_noise_std > 0:
-            dq += rng.normal(0.0, cfg.velocity_noise_std, n)
-        return ArmMeasurement(quantise(data.qpos[idx.qpos], cfg.encoder_counts_per_rev), dq, tau)
 
 
 class TorqueADC:

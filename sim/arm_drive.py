@@ -58,7 +58,7 @@ def quantise(q: Vec, counts_per_rev: int) -> Vec:
     if counts_per_rev == 0:
         return q.copy()
     step = 2 * np.pi / counts_per_rev
-    return np.round(q / step) * step
+    return np.rint(q / step) * step  # np.round's decimals=0 is rint, without its Python wrapper
 
 
 _TORQUE_LIMITS = np.asarray(TORQUE_LIMITS)

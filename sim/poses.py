@@ -21,6 +21,9 @@ GRASP_HEIGHT = 0.006
 """TCP (pad centre) above the conductor's shoulder [m]: the fingertips end 4 mm below the
 TCP, so they stay 2 mm clear of the plate when the shoulder seats."""
 DOWN = np.array([0.0, 0.0, -1.0])
+REST_WEIGHT = 1e-4
+"""[m/rad] Weight of the pull toward a rest posture in the inverse kinematics: small enough
+that the pose stays within ~0.02 um (residual ~ weight^2 |q - rest| / |J|)."""
 
 
 def solve_tcp_pose(scene: Scene, position: np.ndarray, approach: np.ndarray = DOWN,
@@ -31,26 +34,39 @@ def solve_tcp_pose(scene: Scene, position: np.ndarray, approach: np.ndarray = DO
 
     Damped least squares within the joint limits (scipy); raises if the residual > 1 um.
     """
-    m, d = scene.model, scene.data
-    site = m.site(names.ARM + TCP_SITE).id
+    site = scene.model.site(names.ARM + TCP_SITE).id
+    return solve_site_pose(scene.model, scene.data.qpos, scene.arm_qpos_adr, site, position,
+                           approach, yaw_hint, rotation, q_start)
+
+
+def solve_site_pose(model: mujoco.MjModel, qpos: np.ndarray, arm_qpos_adr: np.ndarray, site: int,
+                    position: np.ndarray, approach: np.ndarray = DOWN, yaw_hint: float | None = None,
+                    rotation: np.ndarray | None = None, q_start: np.ndarray | None = None,
+                    rest: np.ndarray | None = None) -> np.ndarray:
+    """:func:`solve_tcp_pose` for any model holding the arm: `qpos` the state the other joints
+    keep, `arm_qpos_adr` the arm joints' addresses, `site` the TCP's id; `rest`: of the
+    redundant arm's solutions, the one nearest these joint angles (the elbow where a posture
+    task pulling toward `rest` would leave it; the pose then within ~0.01 um)."""
+    m = model
     work = mujoco.MjData(m)
-    work.qpos[:] = d.qpos
+    work.qpos[:] = qpos
 
     def residual(q: np.ndarray) -> np.ndarray:
-        work.qpos[scene.arm_qpos_adr] = q
+        work.qpos[arm_qpos_adr] = q
         mujoco.mj_kinematics(m, work)
         rot = work.site_xmat[site].reshape(3, 3)
+        extra = [] if rest is None else [REST_WEIGHT * (q - rest)]
         if rotation is not None:
-            return np.concatenate([work.site_xpos[site] - position, 0.1 * (rot - rotation).ravel()])
-        res = [work.site_xpos[site] - position, 0.1 * (rot[:, 2] - approach)]
+            return np.concatenate([work.site_xpos[site] - position, 0.1 * (rot - rotation).ravel(), *extra])
+        res = [work.site_xpos[site] - position, 0.1 * (rot[:, 2] - approach), *extra]
         if yaw_hint is not None:
             res.append([0.01 * (np.arctan2(rot[1, 0], rot[0, 0]) - yaw_hint)])
         return np.concatenate(res)
 
-    q0 = d.qpos[scene.arm_qpos_adr].copy() if q_start is None else np.asarray(q_start, float)
+    q0 = np.asarray(qpos, float)[arm_qpos_adr].copy() if q_start is None else np.asarray(q_start, float)
     sol = least_squares(residual, q0, bounds=(np.array(Q_MIN), np.array(Q_MAX)), xtol=1e-14,
                         ftol=1e-14, gtol=1e-14)
-    if np.linalg.norm(sol.fun[:3]) > 1e-6 or (rotation is not None and np.linalg.norm(sol.fun[3:]) > 1e-6):
+    if np.linalg.norm(sol.fun[:3]) > 1e-6 or (rotation is not None and np.linalg.norm(sol.fun[3:12]) > 1e-6):
         raise ConfigError(f"TCP target {np.round(position, 4)} m is out of the arm's reach "
                           f"(residual {np.linalg.norm(sol.fun[:3]) * 1e3:.2f} mm)")
     return sol.x

@@ -122,6 +122,22 @@ def _emissive(spec: mujoco.MjSpec) -> str:
     return "backlight"
 
 
+def attach_cell_arm(spec: mujoco.MjSpec, physics: PhysicsConfig, joint_friction: tuple[float, ...] = (),
+                    plant: ArmPlantChanges | None = None) -> None:
+    """The cell's arm at the world origin (prefix ``arm/``): its joints' dry friction, a
+    diagnosed plant over it, the friction rows' stiffness and the pads' contact softness."""
+    arm = build_arm_spec()
+    for joint, friction in zip(JOINT_NAMES, joint_friction):
+        arm.joint(joint).frictionloss = friction
+    if plant is not None:  # after the nominal friction: a diagnosed one replaces it
+        apply_arm_plant(arm, plant, physics.timestep)
+    for joint in JOINT_NAMES:  # whichever dry friction the joints have, its rows' stiffness
+        arm.joint(joint).solref_friction = [physics.arm_friction_timeconst, 1.0]
+    spec.attach(arm, prefix=names.ARM, frame=spec.worldbody.add_frame(pos=[0, 0, 0]))
+    for pad in PAD_GEOMS:
+        spec.geom(names.ARM + pad).solref = list(physics.grip_solref)
+
+
 def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, DrawnDiameters]:
     """The whole cell as one MjSpec, plus the tolerance draw it was built with."""
     diameters = cfg.draw_diameters()
@@ -130,16 +146,7 @@ def build_scene_spec(cfg: SceneConfig = SceneConfig()) -> tuple[mujoco.MjSpec, D
     cfg.physics.apply(spec)
     _add_environment(spec, cfg)
     world = spec.worldbody
-    arm = build_arm_spec()
-    for joint, friction in zip(JOINT_NAMES, cfg.arm_joint_friction):
-        arm.joint(joint).frictionloss = friction
-    if cfg.arm_plant is not None:  # after the nominal friction: a diagnosed one replaces it
-        apply_arm_plant(arm, cfg.arm_plant, cfg.physics.timestep)
-    for joint in JOINT_NAMES:  # whichever dry friction the joints have, its rows' stiffness
-        arm.joint(joint).solref_friction = [cfg.physics.arm_friction_timeconst, 1.0]
-    spec.attach(arm, prefix=names.ARM, frame=world.add_frame(pos=[0, 0, 0]))
-    for pad in PAD_GEOMS:
-        spec.geom(names.ARM + pad).solref = list(cfg.physics.grip_solref)
+    attach_cell_arm(spec, cfg.physics, cfg.arm_joint_friction, cfg.arm_plant)
     if cfg.calibration_board is not None:
         add_board(spec, cfg.calibration_board)
     spec.attach(build_stewart_spec(cfg.stewart, cfg.physics), prefix=names.STEWART,

@@ -141,10 +141,12 @@ class _Snapshot:
 def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
                 on_record: Callable[[HoleRecord], None] | None = None,
                 runtime: tuple[CellRuntime, PlateCommander] | None = None,
-                recording: str | Path | None = None, concealed: bool = False) -> EpisodeSummary:
+                recording: str | Path | None = None, concealed: bool = False,
+                on_insert: Callable[[CellRuntime, int, int], None] | None = None) -> EpisodeSummary:
     """Fill the holes of `cfg`; `on_record` receives each hole's record as it ends; `recording`
     names a folder for the episode's recording (signals, meta.json, episode.rrd); `concealed`:
-    its meta.json holds what a real cell's log would (:func:`cell_log`), not the physics."""
+    its meta.json holds what a real cell's log would (:func:`cell_log`), not the physics;
+    `on_insert(runtime, hole, conductor)` as each insertion starts (HoleCycle.on_insert)."""
     t_wall = time.perf_counter()
     rt, plate = runtime or build_runtime(cfg)
     imaging = ImagingConfig(width=cfg.camera_width) if cfg.sensor_noise else ImagingConfig.ideal(cfg.camera_width)
@@ -162,6 +164,7 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
     rt.scene.on_recompile.extend(rebind)
     law = ControlLaw.FORCE_POSITION if cfg.controller == "force_position" else ControlLaw.IMPEDANCE
     cycle = HoleCycle(rt, plate, camera, pairs, cfg, law)
+    cycle.on_insert = on_insert
     counts = {o.value: 0 for o in Outcome}
     n = cfg.holes if isinstance(cfg.holes, int) else len(cfg.holes)
     done, current = 0, None  # holes finished; the cycle under way

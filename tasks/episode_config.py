@@ -43,6 +43,9 @@ class Outcome(enum.Enum):
     OVERFORCE = "overforce"
     TIMEOUT = "timeout"
     DROPPED = "dropped"
+    SIM_FAULT = "sim_fault"
+    """The simulator could not finish it (a MuJoCo warning, a blown-up state): a Monte Carlo
+    trial's (serpar montecarlo); an episode's hole cycle that breaks is scored by its phase."""
 
 
 @dataclass(frozen=True)

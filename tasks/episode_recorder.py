@@ -149,10 +149,9 @@ class EpisodeRecorder:
         row[0] = t
         row[Q], row[DQ], row[TJ], row[TJD], row[F] = meas.q, meas.dq, meas.tau_J, arm.tau, arm.wrench
         row[LOAD_MASS], row[LOAD_COM] = rt.load_mass, rt.load_com
-        nominal = arm.nominal
-        site = nominal.index.tcp_site
-        row[EE_P] = nominal.data.site_xpos[site]
-        mujoco.mju_mat2Quat(self._quat, nominal.data.site_xmat[site])
+        pos, rot = arm.nominal.tcp_pose()  # the nominal model at the measured joints
+        row[EE_P] = pos
+        mujoco.mju_mat2Quat(self._quat, rot.ravel())
         row[EE_Q] = self._quat
         row[PL] = self._plant
         row[-1] = t_meas

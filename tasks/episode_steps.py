@@ -8,6 +8,7 @@ and the drawn clearance written into the record.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
@@ -140,6 +141,9 @@ class HoleCycle:
         self.conductor: int | None = None
         self.phase = "start"
         self.phase_start: dict[str, float] = {}
+        self.on_insert: Callable[[CellRuntime, int, int], None] | None = None
+        """Called with (runtime, hole, conductor) as each insertion starts, after the tare
+        (serpar montecarlo's validation reads the cell's state there)."""
 
     def _enter(self, phase: str) -> None:
         self.phase = phase
@@ -268,6 +272,8 @@ class HoleCycle:
 
         self._enter("insert")
         rt.arm.tare()
+        if self.on_insert is not None:
+            self.on_insert(rt, self.hole, self.conductor)
         cfg = InsertionConfig(damage_force_n=self.cfg.damage_force_n, time_limit_s=self.cfg.hole_time_limit_s)
         result = insert(rt, seat, HAND_DOWN, approach, self.law, self.conductor, self.hole, cfg, follow)
         self._enter("release")

@@ -46,10 +46,6 @@ def check_reachable(address: str) -> None:
                           f"({exc.strerror or type(exc).__name__})") from None
 
 
-def _call(job: Any, cfg: EpisodeConfig, label: str | None) -> list[dict[str, object]]:
-    return job(cfg, None, label)
-
-
 def _connect(ray: Any, address: str) -> bool:
     """Join `address` ("local": a new instance on this machine, "auto": the running cluster,
     "ray://host:port": a remote one); True if this call started Ray here."""
@@ -71,31 +67,44 @@ def _connect(ray: Any, address: str) -> bool:
     return True
 
 
-def ray_results(configs: Sequence[EpisodeConfig], labels: Sequence[str | None], job: Any,
-                address: str) -> Iterator[list[dict[str, object]]]:
-    """Each config's records as its task finishes (a task that dies, e.g. its worker killed,
-    gives an error record); on exit (done, Ctrl-C, error) the pending tasks are cancelled and
-    a Ray instance started here is shut down."""
+def ray_map(job: Any, args: Sequence[tuple[Any, ...]], address: str, shared: Any = None
+            ) -> Iterator[tuple[int, Any, BaseException | None]]:
+    """``job(shared, *args[i])`` (``shared`` sent to the cluster once) as one Ray task each,
+    one CPU: yields (i, result, None) as tasks finish, or (i, None, error) for a task that died
+    (e.g. its worker killed). On exit (done, Ctrl-C, error) the pending tasks are cancelled
+    and a Ray instance started here is shut down."""
     ray = require_ray()
     started = _connect(ray, address)
-    tasks: dict[Any, tuple[EpisodeConfig, str | None]] = {}
+    tasks: dict[Any, int] = {}
     try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(_call)
-        job_ref = ray.put(job)
-        tasks = {remote.remote(job_ref, cfg, label): (cfg, label) for cfg, label in zip(configs, labels)}
+        remote = ray.remote(num_cpus=1, max_retries=0)(job)
+        shared_ref = ray.put(shared)
+        tasks = {remote.remote(shared_ref, *a): i for i, a in enumerate(args)}
         pending = list(tasks)
         while pending:
             (ref,), pending = ray.wait(pending, num_returns=1)
-            cfg, label = tasks.pop(ref)
+            i = tasks.pop(ref)
             try:
-                records = ray.get(ref)
+                yield i, ray.get(ref), None
             except ray.exceptions.RayError as exc:
-                tag = {} if label is None else {"config": label}
-                records = [{"kind": "error", "episode_seed": cfg.seed, "error": f"{type(exc).__name__}: "
-                            f"{(str(exc).strip().splitlines() or [''])[0]}", **tag}]
-            yield records
+                yield i, None, exc
     finally:
         for ref in tasks:
             ray.cancel(ref, force=True)
         if started:
             ray.shutdown()
+
+
+def _call(job: Any, cfg: EpisodeConfig, label: str | None) -> list[dict[str, object]]:
+    return job(cfg, None, label)
+
+
+def ray_results(configs: Sequence[EpisodeConfig], labels: Sequence[str | None], job: Any,
+                address: str) -> Iterator[list[dict[str, object]]]:
+    """Each config's records as its task finishes (a task that dies gives an error record)."""
+    for i, records, exc in ray_map(_call, list(zip(configs, labels)), address, shared=job):
+        if exc is not None:
+            tag = {} if labels[i] is None else {"config": labels[i]}
+            records = [{"kind": "error", "episode_seed": configs[i].seed, "error": f"{type(exc).__name__}: "
+                        f"{(str(exc).strip().splitlines() or [''])[0]}", **tag}]
+        yield records

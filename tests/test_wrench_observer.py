@@ -1,5 +1,5 @@
 """The arm's wrench estimate, a generalised-momentum observer (controllers/wrench.py): its model
-terms against an independent derivation, its noise at rest with the default sensors, its
+terms (controllers/batch_model.py) against an independent derivation, its noise at rest with the default sensors, its
 response to a known force at the TCP and its silence in free motion."""
 
 from __future__ import annotations
@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from serpar.controllers.arm_controller import ArmController, ControlLaw, controller_config
-from serpar.controllers.arm_model import NominalArm
-from serpar.controllers.momentum import MomentumTerms
+from serpar.controllers.batch_model import BatchNominalArm
 from serpar.controllers.trajectory import LineMove
 from serpar.controllers.wrench import WrenchEstimatorConfig
 from serpar.errors import ConfigError
@@ -26,23 +25,22 @@ HELD_TCP = np.array([0.4, -0.2, 0.4])
 def test_beta_is_gravity_less_coriolis_transpose() -> None:
     """beta = n - Mdot dq must equal g - C^T dq, with C^T dq = dT/dq (T = dq^T M dq / 2)
     computed by differentiating the kinetic energy: Mdot = C + C^T, checked numerically."""
-    nominal = NominalArm()
-    terms = MomentumTerms(nominal)
+    nominal = BatchNominalArm(1)
     rng = np.random.default_rng(0)
     for _ in range(3):
         q, dq = np.array(HOME_Q) + rng.normal(0, 0.3, 7), rng.normal(0, 1.0, 7)
-        nominal.load(q, np.zeros(7))
-        g = nominal.data.qfrc_bias[nominal.index.dof].copy()
+        nominal.load(q[None], np.zeros((1, 7)))
+        g = nominal.rne_bias()[0]
 
         def kinetic(qq: np.ndarray, dq: np.ndarray = dq) -> float:
-            nominal.load(qq, dq)
-            return 0.5 * dq @ terms.link_mass() @ dq
+            nominal.load(qq[None], dq[None])
+            return 0.5 * dq @ nominal.link_mass()[0] @ dq
 
         h = 1e-6
         dT_dq = np.array([(kinetic(q + h * e) - kinetic(q - h * e)) / (2 * h) for e in np.eye(7)])
-        nominal.load(q, dq)
-        assert np.allclose(terms.beta(), g - dT_dq, atol=1e-7)
-        assert np.allclose(terms.momentum(), terms.link_mass() @ dq)
+        nominal.load(q[None], dq[None])
+        assert np.allclose(nominal.beta()[0], g - dT_dq, atol=1e-7)
+        assert np.allclose(nominal.momentum()[0], nominal.link_mass()[0] @ dq)
 
 
 def _held(noise: bool, seed: int = 1) -> tuple[Scene, ArmController, int]:
