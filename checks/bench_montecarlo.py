@@ -51,7 +51,7 @@ def montecarlo_bench(trials: int = 32, threads: tuple[int, ...] = (1, 2), seed: 
     out: dict[str, object] = {"trials": trials, "by_threads": {}}
     for n in threads:
         t0 = time.perf_counter()
-        rows = run_block(cfg, seed, 0, trials, n)
+        rows = run_block(cfg, seed, 0, trials, n, slots=trials)
         wall = time.perf_counter() - t0
         steps = _physics_steps(rows, timestep)
         bare = bare_rate(cfg, trials, seed, n)

@@ -11,7 +11,7 @@ was drawn and what happened (``trials.parquet``).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -33,8 +33,8 @@ from serpar.tasks.ray_runner import ray_map
 from serpar.tasks.trial_start import TrialStart, plan_start
 
 BATCH = 256
-"""Trials per batch: large enough that the controller's numpy work per period is spread
-thin, small enough that a batch is minutes, not the whole run (progress, interrupts)."""
+"""Simulations at a time (and trials per Ray task): enough that the controller's numpy work per
+period is spread thin over the physics of many trials (~4 % at 2 threads)."""
 
 
 @dataclass(frozen=True)
@@ -134,46 +134,77 @@ def prepare(cfg: MonteCarloConfig, seed: int, trials: range, q_guess: np.ndarray
     return models, starts, samples
 
 
+class _Trials(Sequence[Trial]):
+    """Trials ``first..stop-1``, each drawn, built and placed when asked for (a slot taking it),
+    so that a run holds only its slots' models."""
+
+    def __init__(self, cfg: MonteCarloConfig, seed: int, first: int, stop: int) -> None:
+        self.cfg, self.seed, self.first, self.stop = cfg, seed, first, stop
+        self.samples: dict[int, tuple[TrialSample, TrialStart]] = {}
+
+    def __len__(self) -> int:
+        return self.stop - self.first
+
+    def __getitem__(self, i):  # type: ignore[no-untyped-def, override]
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        k = self.first + int(i)
+        # every trial's inverse kinematics from the same guess: the arm has one redundant
+        # joint, so the elbow a solution lands on depends on where the search started
+        (model,), (start,), (sample,) = prepare(self.cfg, self.seed, range(k, k + 1), np.array(HOME_Q))
+        self.samples[k] = (sample, start)
+        return Trial(model, start, trial_seeds(self.seed, [k])[0], sample.draw.hole_diameter)
+
+
 def run_block(cfg: MonteCarloConfig, seed: int, first: int, stop: int, threads: int = 1,
+              slots: int = BATCH, on_row: Callable[[TrialRow], None] | None = None,
               on_period: Callable[[int], None] | None = None) -> list[TrialRow]:
-    """Trials first..stop-1 as one batch (a local batch, or one Ray task)."""
-    block = range(first, stop)
+    """Trials first..stop-1 in ``slots`` simulations at a time (a local run, or one Ray task);
+    ``on_row`` as each ends."""
+    trials = _Trials(cfg, seed, first, stop)
     scene = scene_config(cfg)
-    # every trial's inverse kinematics from the same guess: the arm has one redundant joint,
-    # so the elbow a solution lands on depends on where the search started
-    models, starts, samples = prepare(cfg, seed, block, np.array(HOME_Q))
-    trials = [Trial(m, st, sd, s.draw.hole_diameter) for m, st, sd, s in
-              zip(models, starts, trial_seeds(seed, block), samples)]
-    results = run_trials(trials, scene.chamfer, trial_config(cfg), threads, on_period)
-    return [TrialRow(k, s, _tip_off_axis(st, scene) * 1e3, r)
-            for k, s, st, r in zip(block, samples, starts, results)]
+    rows: list[TrialRow] = []
+
+    def done(i: int, r: TrialResult) -> None:
+        k = first + i
+        sample, start = trials.samples.pop(k)
+        rows.append(TrialRow(k, sample, _tip_off_axis(start, scene) * 1e3, r))
+        if on_row is not None:
+            on_row(rows[-1])
+
+    run_trials(trials, scene.chamfer, trial_config(cfg), threads, on_period, slots, done)
+    return sorted(rows, key=lambda r: r.trial)
 
 
 def _ray_block(_: None, cfg: MonteCarloConfig, seed: int, first: int, stop: int) -> list[TrialRow]:
-    return run_block(cfg, seed, first, stop)
+    return run_block(cfg, seed, first, stop, slots=stop - first)
 
 
 def run_montecarlo(cfg: MonteCarloConfig, trials: int, seed: int, threads: int = 2,
-                   batch: int = BATCH, on_batch: Callable[[list[TrialRow]], None] | None = None,
+                   batch: int = BATCH, on_rows: Callable[[list[TrialRow]], None] | None = None,
                    on_period: Callable[[int], None] | None = None,
                    ray_address: str | None = None) -> MonteCarloResult:
-    """``trials`` trials in batches of ``batch``, here on ``threads`` threads or as one Ray task
-    per batch (``ray_address``); Ctrl-C keeps the batches that finished. A dead Ray task's
-    trials are missing from the result, and the reason is in ``errors``."""
+    """``trials`` trials here, ``batch`` simulations at a time on ``threads`` threads, a trial
+    starting as another ends; or as one Ray task per ``batch`` trials (``ray_address``).
+    ``on_rows`` gets the rows as they finish. Ctrl-C keeps the trials that finished; a dead Ray
+    task's trials are missing from the result, and the reason is in ``errors``."""
     if trials < 1 or threads < 1 or batch < 1:
         raise ConfigError(f"trials {trials}, threads {threads}, batch {batch}: each must be >= 1")
     t0 = time.perf_counter()
     result = MonteCarloResult(cfg, seed, trials)
-    blocks = [(first, min(first + batch, trials)) for first in range(0, trials, batch)]
+
+    def keep(rows: list[TrialRow]) -> None:
+        result.rows.extend(rows)
+        if on_rows is not None:
+            on_rows(rows)
+
     try:
         if ray_address is None:
-            done = (run_block(cfg, seed, a, b, threads, on_period) for a, b in blocks)
+            run_block(cfg, seed, 0, trials, threads, batch, lambda row: keep([row]), on_period)
         else:
-            done = _ray_rows(cfg, seed, blocks, ray_address, result)
-        for rows in done:
-            result.rows.extend(rows)
-            if on_batch is not None:
-                on_batch(rows)
+            blocks = [(first, min(first + batch, trials)) for first in range(0, trials, batch)]
+            for rows in _ray_rows(cfg, seed, blocks, ray_address, result):
+                keep(rows)
     except KeyboardInterrupt:
         result.interrupted = True
     result.rows.sort(key=lambda r: r.trial)

@@ -44,7 +44,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=os.cpu_count() or 1,
                    help=f"CPU threads of the batched physics (default: all, {os.cpu_count()})")
     p.add_argument("--batch", type=int, default=BATCH,
-                   help=f"trials simulated together (default {BATCH}; results do not depend on it)")
+                   help=f"simulations at a time, a trial starting as another ends; with --ray, trials "
+                        f"per task (default {BATCH}; results do not depend on it)")
     p.add_argument("--ray", metavar="ADDRESS",
                    help="one Ray task per batch on a cluster: local, auto or ray://HOST:PORT "
                         "(cluster extra); results equal a local run's")
@@ -87,12 +88,15 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
     report = out_file(args.report, "--report", args.force, suffix=".html") if args.report else None
     bar = progress(args.trials, "trials", enabled=sys.stderr.isatty())
 
-    def on_batch(rows: list) -> None:
-        bar.update(len(rows))
-        seated = sum(r.result.outcome.value == "success" for r in rows)
-        bar.set_postfix_str(f"last batch {seated}/{len(rows)} seated")
+    seated = [0, 0]
 
-    result = run_montecarlo(cfg, args.trials, args.seed, args.threads, args.batch, on_batch,
+    def on_rows(rows: list) -> None:
+        bar.update(len(rows))
+        seated[0] += sum(r.result.outcome.value == "success" for r in rows)
+        seated[1] += len(rows)
+        bar.set_postfix_str(f"{seated[0]}/{seated[1]} seated")
+
+    result = run_montecarlo(cfg, args.trials, args.seed, args.threads, args.batch, on_rows,
                             ray_address=args.ray)
     for error in result.errors:
         sys.stderr.write(f"serpar montecarlo: {error}\n")

@@ -9,7 +9,9 @@ the episode's at a batch of one); the plant is a ``mujoco.batch.Batch`` stepped 
 period at a time by ``rollout`` (the command held over the period, the substep that switches
 it given the mean of old and new as in controllers/cell_runtime.py, the torque sensors' period
 mean from the recorded substeps with the episode's :class:`TorqueADC` weights). No Python loop
-over trials runs within a period.
+over trials runs within a period. A batch is a fixed number of slots: a trial that ends leaves
+its slot to the next one waiting (streaming), so no thread idles while the slowest trial of a
+batch finishes; a trial's result does not depend on its slot or its neighbours.
 """
 
 from __future__ import annotations
@@ -26,24 +28,29 @@ from serpar.controllers.arm_controller import ArmControllerConfig, ControlLaw, c
 from serpar.controllers.arm_sensors import TorqueADC
 from serpar.controllers.batch_controller import BatchArmController
 from serpar.controllers.batch_sensors import Seed
-from serpar.controllers.cell_runtime import MAX_SPEED
 from serpar.errors import ConfigError
 from serpar.sim import names
 from serpar.sim.arm import GRIP_ACTUATOR
 from serpar.sim.arm_drive import ArmIndex
 from serpar.sim.trial_scene import TrialIds
-from serpar.tasks.episode_config import Outcome
-from serpar.tasks.episode_steps import FOLLOW_DEADBAND, FOLLOW_STOP_ABOVE
+from serpar.tasks.episode_steps import FOLLOW_STOP_ABOVE
 from serpar.tasks.hole_cycle import GRASP_SQUEEZE
 from serpar.tasks.insertion import InsertionConfig
+from serpar.tasks.trial_phases import (
+    DONE,
+    TrialResult,
+    TrialSlots,
+    classify,
+    follow,
+    health,
+    score,
+    stall,
+    targets,
+)
 from serpar.tasks.trial_start import TrialStart, write_start
 
 Arr = NDArray[np.float64]
-SETTLE, APPROACH, PUSH, DONE = 0, 1, 2, 3
-FOLLOW_EVERY = 10
-"""Control periods between the platform's corrections (100 Hz, tasks/episode_steps.py)."""
-CONTACT_FORCE_N = 0.05
-"""A period-mean plate force above this is first contact (tasks/insertion.py)."""
+__all__ = ["Trial", "TrialConfig", "TrialResult", "run_trials"]
 
 
 @dataclass(frozen=True)
@@ -68,62 +75,6 @@ class TrialConfig:
             raise ConfigError(f"settle_s {self.settle_s}: valid {window:g}..5 s (the tare's window)")
 
 
-@dataclass(frozen=True)
-class TrialResult:
-    outcome: Outcome
-    reason: str
-    peak_force_n: float
-    lateral_misalignment_mm: float
-    insertion_time_s: float
-    depth_shortfall_mm: float
-    sim_time_s: float
-    """Simulated time from the start of the approach to the end."""
-
-
-@dataclass
-class _Slots:
-    """Per-trial state of the insertion (arrays over the batch)."""
-
-    n: int
-    settle_s: float
-    bore_start: float
-    """Depth below the entry where the straight bore begins (the chamfer's foot) [m]."""
-    mouth_radius: Arr
-    """Each trial's hole radius at its entry (bore radius + chamfer) [m]: a tip ending farther off
-    the axis missed the hole (past the plate's edge, where a neighbour hole would be)."""
-    phase: NDArray[np.int8] = field(init=False)
-    t: Arr = field(init=False)
-    t_phase: Arr = field(init=False)
-    t_begin: Arr = field(init=False)
-    """When the approach began (the time limit counts from there)."""
-    timed_out: NDArray[np.bool_] = field(init=False)
-    start: Arr = field(init=False)
-    held: Arr = field(init=False)
-    peak: Arr = field(init=False)
-    t_contact: Arr = field(init=False)
-    lateral: Arr = field(init=False)
-    fault: list[str] = field(init=False)
-    calls: NDArray[np.int64] = field(init=False)
-    """Approach periods so far (the platform acts every FOLLOW_EVERY)."""
-    shift: Arr = field(init=False)
-    """Where the platform last put the hole, against its start [m]."""
-
-    def __post_init__(self) -> None:
-        n = self.n
-        self.phase = np.full(n, SETTLE, dtype=np.int8)
-        self.t, self.t_phase, self.t_begin = np.zeros(n), np.zeros(n), np.zeros(n)
-        self.timed_out = np.zeros(n, dtype=bool)
-        self.start, self.held = np.zeros((n, 3)), np.zeros((n, 3))
-        self.peak, self.t_contact, self.lateral = np.zeros(n), np.full(n, np.nan), np.full(n, np.nan)
-        self.fault = [""] * n
-        self.calls, self.shift = np.zeros(n, dtype=np.int64), np.zeros((n, 3))
-
-
-def _in_hole_frame(xpos: Arr, xmat: Arr, site: int, hole: int) -> Arr:
-    rot = xmat[:, hole].reshape(-1, 3, 3)
-    return np.einsum("nji,nj->ni", rot, xpos[:, site] - xpos[:, hole])
-
-
 @dataclass(frozen=True, eq=False)
 class Trial:
     """One trial: its scene (with its part diameters), start and sensor-noise stream."""
@@ -135,198 +86,127 @@ class Trial:
 
 
 def run_trials(trials: Sequence[Trial], chamfer: float, cfg: TrialConfig = TrialConfig(),
-               nthread: int = 1, on_period: Callable[[int], None] | None = None) -> list[TrialResult]:
-    """Run one batch of trials to their ends (their models must share one spec's sizes; the
-    bore's entry ``chamfer`` [m]); ``on_period(active)`` after every control period."""
-    n = len(trials)
-    if not n:
+               nthread: int = 1, on_period: Callable[[int], None] | None = None,
+               slots: int | None = None, on_result: Callable[[int, TrialResult], None] | None = None
+               ) -> list[TrialResult]:
+    """Run ``trials`` to their ends in ``slots`` simulations at a time (default: all at once),
+    each started as a slot frees (their models must share one spec's sizes; the bore's entry
+    ``chamfer`` [m]); ``on_period(active)`` after every control period, ``on_result(i, r)`` as
+    trial i ends. Each trial is read from ``trials`` once, when its slot takes it (a lazy
+    sequence builds its scene then)."""
+    if not trials:
         raise ConfigError("run_trials needs at least one trial")
-    models, starts, seeds = [t.model for t in trials], [t.start for t in trials], [t.seed for t in trials]
-    model, ins = models[0], cfg.insertion
-    ids, arm = TrialIds.of(model), ArmIndex.from_model(model, names.ARM)
-    batch = mujoco.batch.Batch(model, n, nthread)
-    batch.set_models(list(models))
-    ctl = BatchArmController(n, model.opt.timestep, cfg.controller, seeds=list(seeds), nthread=nthread)
-    substeps, dt = ctl.substeps, ctl.dt
-    adc = TorqueADC(arm, substeps).weights
-    qpos, qvel, ctrl = batch.bind("qpos"), batch.bind("qvel"), batch.bind("ctrl")
-    for output in ("site_xpos", "site_xmat", "sensordata", "qfrc_bias"):
-        batch.bind(output)  # an output bound later reads zero until the next call fills it
-    _place(batch, starts, ids, arm, model)
-    grip = model.actuator(names.ARM + GRIP_ACTUATOR).id
-    ctrl[:, grip] = cfg.squeeze_n
-    s = _Slots(n, cfg.settle_s, chamfer, np.array([t.hole_diameter / 2 + chamfer for t in trials]))
-    rot = np.stack([st.rot for st in starts])
-    axis = np.stack([st.axis for st in starts])
-    goal = np.stack([st.seat for st in starts]) + ins.overtravel * axis
-    window = round(ins.stall_s / dt) + 1
-    ring, nring = np.zeros((n, window)), np.zeros(n, dtype=np.int64)
-    ctl.track(np.stack([st.start for st in starts]), rot)
-    batch.forward()
-    tau = batch.bind("sensordata")[:, arm.torque_adr].copy()
-    force_adr = np.arange(ids.plate_force.start, ids.plate_force.stop)
-    control = np.zeros((n, substeps, model.nu))
-    mocap = batch.bind("mocap_pos")
-    plate0 = mocap[:, ids.plate_mocap].copy()
-    stop_after = np.array([st.height for st in starts]) - cfg.follow_stop_above
-    while (active := np.flatnonzero(s.phase != DONE)).size:
-        q, dq = qpos[:, arm.qpos].copy(), qvel[:, arm.dof].copy()
-        _targets(ctl, s, active, rot, axis, goal, ins, dt)
-        _follow(ctl, s, active, axis, mocap, ids.plate_mocap, plate0, stop_after)
-        held_cmd = ctrl[:, arm.actuators].copy()
-        new = ctl.update(q, dq, tau)
-        control[:, :, :] = ctrl[:, None, :]
-        control[:, :, arm.actuators] = new[:, None, :]
-        control[:, 0, arm.actuators] = 0.5 * (held_cmd + new)
-        try:
-            rec = batch.rollout(substeps, control[active], record=("sensordata",), ids=active)
-        except mujoco.batch.SimulationError as exc:
-            for i in active[batch.status[active] != 0]:
-                s.fault[i] = batch.error(int(i)) or str(exc)
-            rec = {"sensordata": np.zeros((active.size, substeps, model.nsensordata))}
-        ctrl[active[:, None], arm.actuators] = new[active]
-        sens = rec["sensordata"]
-        tau[active] = np.einsum("s,nsj->nj", adc, sens[:, :, arm.torque_adr])
-        force = np.linalg.norm(sens[:, :, force_adr], axis=2).mean(axis=1)
-        s.t[active] += dt
-        _score(batch, s, active, force, ids)
-        _stall(ctl, s, active, axis, ring, nring, window, ins)
-        _health(batch, s, active, qvel)
-        if on_period is not None:
-            on_period(int(active.size))
-    return _classify(batch, s, ids, ins)
+    runner = _Runner(trials, chamfer, cfg, nthread, min(len(trials), slots or len(trials)))
+    return runner.run(on_period, on_result)
 
 
-def _place(batch: mujoco.batch.Batch, starts: Sequence[TrialStart], ids: TrialIds, arm: ArmIndex,
-           model: mujoco.MjModel) -> None:
-    """Every trial's start state into the batch's rows."""
-    qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
-    batch.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
-    for i, st in enumerate(starts):
-        write_start(qpos[i], ids, st)
-    qvel[:] = 0.0
-    batch.forward()
-    # The arm starts holding itself against gravity, as it was at the hover.
-    batch.bind("ctrl")[:, arm.actuators] = batch.bind("qfrc_bias")[:, arm.dof]
+@dataclass
+class _Runner:
+    trials: Sequence[Trial]
+    chamfer: float
+    cfg: TrialConfig
+    nthread: int
+    n: int
+    """Slots (simulations in the batch)."""
+    results: list[TrialResult | None] = field(init=False)
 
+    def __post_init__(self) -> None:
+        self._first = self.trials[0]
+        first = self._first.model
+        self.ids, self.arm = TrialIds.of(first), ArmIndex.from_model(first, names.ARM)
+        self.batch = mujoco.batch.Batch(first, self.n, self.nthread)
+        self.models = [first] * self.n  # each slot's trial model, set as it loads
+        self.ctl = BatchArmController(self.n, first.opt.timestep, self.cfg.controller,
+                                      seeds=[self._first.seed] * self.n, nthread=self.nthread)
+        for output in ("site_xpos", "site_xmat", "sensordata", "qfrc_bias"):
+            self.batch.bind(output)  # an output bound later reads zero until the next call fills it
+        self.grip = first.actuator(names.ARM + GRIP_ACTUATOR).id
+        self.tau = np.zeros((self.n, len(self.arm.dof)))
+        window = round(self.cfg.insertion.stall_s / self.ctl.dt) + 1
+        self.s = TrialSlots(self.n, self.cfg.settle_s, self.chamfer, window)
+        self.occupant = np.full(self.n, -1)
+        self.next = 0
+        self.results = [None] * len(self.trials)
 
-def _targets(ctl: BatchArmController, s: _Slots, active: NDArray[np.intp], rot: Arr, axis: Arr,
-             goal: Arr, ins: InsertionConfig, dt: float) -> None:
-    """Each trial's law and target for this period (tasks/insertion.py's _push)."""
-    pos, _ = ctl.nominal.tcp_pose()
-    pos = pos.copy()
-    ready = active[(s.phase[active] == SETTLE) & (s.t[active] >= s.settle_s - 1e-9)]
-    if ready.size:  # the insert begins: tare with the TCP free, approach from where it is
-        ctl.tare(ready)
-        s.start[ready], s.phase[ready] = pos[ready], APPROACH
-        s.t_phase[ready] = s.t_begin[ready] = s.t[ready]
-    a = active[s.phase[active] == APPROACH]
-    if a.size:
-        along = np.minimum((s.t[a] - s.t_phase[a]) * ins.approach_speed,
-                           np.einsum("ni,ni->n", axis[a], goal[a] - s.start[a]))
-        ctl.track(s.start[a] + along[:, None] * axis[a], rot[a],
-                  np.concatenate([ins.approach_speed * axis[a], np.zeros((a.size, 3))], axis=1),
-                  law=ControlLaw.IMPEDANCE, ids=a)
-        touched = a[ctl.measured_push()[a] > ins.contact_n]
-        s.held[touched], s.t_phase[touched], s.phase[touched] = pos[touched], s.t[touched], PUSH
-    p = active[s.phase[active] == PUSH]
-    if p.size:
-        since = s.t[p] - s.t_phase[p]
-        ramp = np.where(since >= ins.force_ramp_s, ins.force_n, ins.contact_n + (
-            ins.force_n - ins.contact_n) * since / max(ins.force_ramp_s, 1e-12))
-        ctl.track(s.held[p], rot[p], law=ControlLaw.FORCE_POSITION, force_axis=axis[p], force=ramp,
-                  ids=p)
+    def _load(self, slots: NDArray[np.intp]) -> None:
+        """The next waiting trials into ``slots``, at their start, the arm holding itself against
+        gravity as it was at the hover, the part squeezed, a fresh controller."""
+        k = np.arange(self.next, self.next + slots.size)
+        self.next += slots.size
+        trials = [self._first if i == 0 else self.trials[int(i)] for i in k]
+        for slot, t in zip(slots, trials):
+            self.models[slot] = t.model
+        batch, arm, ids = self.batch, self.arm, self.ids
+        batch.set_models(self.models)
+        batch.reset(ids=slots, stage=mujoco.mjtStage.mjSTAGE_NONE)
+        qpos = batch.bind("qpos")
+        for slot, t in zip(slots, trials):
+            write_start(qpos[slot], ids, t.start)
+        batch.bind("qvel")[slots] = 0.0
+        batch.forward(ids=slots)
+        ctrl = batch.bind("ctrl")
+        ctrl[slots[:, None], arm.actuators] = batch.bind("qfrc_bias")[slots[:, None], arm.dof]
+        ctrl[slots, self.grip] = self.cfg.squeeze_n
+        self.ctl.restart(slots, [t.seed for t in trials])
+        starts = [t.start for t in trials]
+        rot, axis = np.stack([st.rot for st in starts]), np.stack([st.axis for st in starts])
+        self.ctl.track(np.stack([st.start for st in starts]), rot, ids=slots)
+        goal = np.stack([st.seat for st in starts]) + self.cfg.insertion.overtravel * axis
+        stop_after = np.array([st.height for st in starts]) - self.cfg.follow_stop_above
+        plate0 = batch.bind("mocap_pos")[slots, ids.plate_mocap].copy()
+        mouth = np.array([t.hole_diameter / 2 + self.chamfer for t in trials])
+        self.s.load(slots, rot, axis, goal, stop_after, plate0, mouth)
+        self.tau[slots] = batch.bind("sensordata")[slots[:, None], arm.torque_adr]
+        self.occupant[slots] = k
 
+    def _finish(self, on_result: Callable[[int, TrialResult], None] | None) -> None:
+        """Score the trials that ended and start waiting ones in their slots."""
+        ended = np.flatnonzero((self.s.phase == DONE) & (self.occupant >= 0))
+        if not ended.size:
+            return
+        for slot, r in zip(ended, classify(self.batch, self.s, ended, self.ids, self.cfg.insertion)):
+            k = int(self.occupant[slot])
+            self.results[k] = r
+            if on_result is not None:
+                on_result(k, r)
+        self.occupant[ended] = -1
+        waiting = min(ended.size, len(self.trials) - self.next)
+        if waiting:
+            self._load(ended[:waiting])
 
-def _follow(ctl: BatchArmController, s: _Slots, active: NDArray[np.intp], axis: Arr, mocap: Arr,
-            plate: int, plate0: Arr, stop_after: Arr) -> None:
-    """The platform keeps the hole under the measured TCP during the approach (only sideways,
-    only until the tip is ``follow_stop_above`` over the entry): the episode's HoleUnderJournal,
-    with the plate moved where its legs would put it."""
-    a = active[s.phase[active] == APPROACH]
-    if not a.size:
-        return
-    s.calls[a] += 1
-    a = a[s.calls[a] % FOLLOW_EVERY == 0]
-    pos, _ = ctl.nominal.tcp_pose()
-    shift = pos[a] - s.start[a]
-    travelled = np.einsum("ni,ni->n", shift, axis[a])
-    shift -= travelled[:, None] * axis[a]
-    moved = (travelled <= stop_after[a]) & (np.linalg.norm(shift - s.shift[a], axis=1) >= FOLLOW_DEADBAND)
-    a, shift = a[moved], shift[moved]
-    s.shift[a] = shift
-    mocap[a, plate] = plate0[a] + shift
-
-
-def _score(batch: mujoco.batch.Batch, s: _Slots, active: NDArray[np.intp], force: Arr,
-           ids: TrialIds) -> None:
-    """Peak plate force (1 ms means) and, at first contact, the tip's lateral offset."""
-    s.peak[active] = np.maximum(s.peak[active], force)
-    first = active[(force > CONTACT_FORCE_N) & np.isnan(s.t_contact[active])]
-    if first.size:
-        xpos, xmat = batch.bind("site_xpos")[first], batch.bind("site_xmat")[first]
-        tip = _in_hole_frame(xpos, xmat, ids.tip_site, ids.hole_site)
-        s.t_contact[first], s.lateral[first] = s.t[first], np.hypot(tip[:, 0], tip[:, 1])
-
-
-def _stall(ctl: BatchArmController, s: _Slots, active: NDArray[np.intp], axis: Arr, ring: Arr,
-           nring: NDArray[np.int64], window: int, ins: InsertionConfig) -> None:
-    """The push ends once ramped and the TCP advanced less than stall_speed over stall_s (the
-    window, not one period: one encoder count is ~3 um at the TCP); or at the time limit."""
-    p = active[s.phase[active] == PUSH]
-    if p.size:
-        pos, _ = ctl.nominal.tcp_pose()
-        ring[p, nring[p] % window] = np.einsum("ni,ni->n", axis[p], pos[p])
-        nring[p] += 1
-        full = nring[p] >= window
-        newest, oldest = ring[p, (nring[p] - 1) % window], ring[p, nring[p] % window]
-        ramped = s.t[p] - s.t_phase[p] >= ins.force_ramp_s
-        stalled = p[full & ramped & (newest - oldest < ins.stall_speed * ins.stall_s)]
-        s.phase[stalled] = DONE
-    moving = active[(s.phase[active] == APPROACH) | (s.phase[active] == PUSH)]
-    out = moving[s.t[moving] - s.t_begin[moving] >= ins.time_limit_s - 1e-9]
-    s.phase[out], s.timed_out[out] = DONE, True
-
-
-def _health(batch: mujoco.batch.Batch, s: _Slots, active: NDArray[np.intp], qvel: Arr) -> None:
-    """A trial the simulator could not finish ends as a fault (named), the others go on: a
-    MuJoCo warning, a non-finite state or a body faster than MAX_SPEED (cell_runtime.py)."""
-    warned = batch.warning[active, :, 0].sum(axis=1) > 0  # (nsim, mjNWARNING, [number, info])
-    v = qvel[active]
-    bad = warned | ~np.isfinite(v).all(axis=1) | (np.abs(np.nan_to_num(v, nan=np.inf)).max(axis=1) > MAX_SPEED)
-    for i in active[bad]:
-        if not s.fault[i]:
-            s.fault[i] = ("MuJoCo warning" if warned[np.flatnonzero(active == i)[0]] else
-                          "state blew up or went non-finite") + f" at t = {s.t[i]:.3f} s"
-    for i in active:
-        if s.fault[i]:
-            s.phase[i] = DONE
-
-
-def _classify(batch: mujoco.batch.Batch, s: _Slots, ids: TrialIds, ins: InsertionConfig
-              ) -> list[TrialResult]:
-    """The episode's outcome of each trial (tasks/insertion.py _classify), or sim_fault."""
-    batch.forward()
-    xpos, xmat = batch.bind("site_xpos"), batch.bind("site_xmat")
-    shoulder = _in_hole_frame(xpos, xmat, ids.shoulder_site, ids.hole_site)[:, 2]
-    tip = _in_hole_frame(xpos, xmat, ids.tip_site, ids.hole_site)
-    tip_depth, tip_off = -tip[:, 2], np.hypot(tip[:, 0], tip[:, 1])
-    out = []
-    for i in range(s.n):
-        t_ins = s.t[i] - s.t_contact[i] if np.isfinite(s.t_contact[i]) else float("nan")
-        lateral, peak, short = s.lateral[i] * 1e3, float(s.peak[i]), float(shoulder[i])
-        if s.fault[i]:
-            outcome, reason = Outcome.SIM_FAULT, s.fault[i]
-        elif peak > ins.damage_force_n:
-            outcome, reason = Outcome.OVERFORCE, f"peak {peak:.1f} N > {ins.damage_force_n:g} N"
-        elif short <= ins.seat_tolerance:
-            outcome, reason = Outcome.SUCCESS, "seated"
-        elif s.timed_out[i]:
-            outcome, reason = Outcome.TIMEOUT, f"not seated after {ins.time_limit_s:g} s"
-        elif tip_depth[i] <= s.bore_start or tip_off[i] > s.mouth_radius[i]:
-            outcome, reason = Outcome.ALIGN_FAIL, f"tip on the rim or chamfer, {lateral:.3f} mm off axis"
-        else:
-            outcome, reason = Outcome.JAM, f"stuck {short * 1e3:.3f} mm short of seated"
-        out.append(TrialResult(outcome, reason, peak, float(lateral), float(t_ins),
-                               max(short, 0.0) * 1e3, float(s.t[i] - s.t_begin[i])))
-    return out
+    def run(self, on_period: Callable[[int], None] | None,
+            on_result: Callable[[int, TrialResult], None] | None) -> list[TrialResult]:
+        self._load(np.arange(self.n))
+        batch, arm, ins, s, ctl = self.batch, self.arm, self.cfg.insertion, self.s, self.ctl
+        qpos, qvel, ctrl, mocap = batch.bind("qpos"), batch.bind("qvel"), batch.bind("ctrl"), batch.bind("mocap_pos")
+        substeps, dt, model = ctl.substeps, ctl.dt, self._first.model
+        adc = TorqueADC(arm, substeps).weights
+        force_adr = np.arange(self.ids.plate_force.start, self.ids.plate_force.stop)
+        control = np.zeros((self.n, substeps, model.nu))
+        while (active := np.flatnonzero(s.phase != DONE)).size:
+            q, dq = qpos[:, arm.qpos].copy(), qvel[:, arm.dof].copy()
+            targets(ctl, s, active, ins)
+            follow(ctl, s, active, mocap, self.ids.plate_mocap)
+            held_cmd = ctrl[:, arm.actuators].copy()
+            new = ctl.update(q, dq, self.tau)
+            control[:, :, :] = ctrl[:, None, :]
+            control[:, :, arm.actuators] = new[:, None, :]
+            control[:, 0, arm.actuators] = 0.5 * (held_cmd + new)
+            try:
+                rec = batch.rollout(substeps, control[active], record=("sensordata",), ids=active)
+            except mujoco.batch.SimulationError as exc:
+                for i in active[batch.status[active] != 0]:
+                    s.fault[i] = batch.error(int(i)) or str(exc)
+                rec = {"sensordata": np.zeros((active.size, substeps, model.nsensordata))}
+            ctrl[active[:, None], arm.actuators] = new[active]
+            sens = rec["sensordata"]
+            self.tau[active] = np.einsum("s,nsj->nj", adc, sens[:, :, arm.torque_adr])
+            force = np.linalg.norm(sens[:, :, force_adr], axis=2).mean(axis=1)
+            s.t[active] += dt
+            score(batch, s, active, force, self.ids)
+            stall(ctl, s, active, ins)
+            health(batch, s, active, qvel)
+            if on_period is not None:
+                on_period(int(active.size))
+            self._finish(on_result)
+        return [r for r in self.results if r is not None]

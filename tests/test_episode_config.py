@@ -70,5 +70,6 @@ def test_wilson_interval_known_values():
 
 
 def test_outcomes_are_the_issue_taxonomy():
+    """The episode's outcomes, and sim_fault: a Monte Carlo trial the simulator could not finish."""
     assert [o.value for o in Outcome] == ["success", "vision_miss", "grasp_fail", "align_fail", "jam",
-                                          "overforce", "timeout", "dropped"]
+                                          "overforce", "timeout", "dropped", "sim_fault"]
