@@ -233,8 +233,8 @@ def write_parquet(result: MonteCarloResult, path: Path) -> None:
 def sensitivity(result: MonteCarloResult) -> dict[str, float | None]:
     """Per error source, how well its size alone tells failed trials from seated ones: the
     probability that a failed trial's draw of it is larger than a seated one's (AUC; 0.5 = no
-    bearing on the outcome, 1 = failures are exactly the large draws). None without both, or
-    for a source this budget leaves out."""
+    bearing on the outcome, 1 = the failures are exactly the large draws, 0 = the small ones).
+    None without both, or for a source this budget leaves out."""
     ok = np.array([r.result.outcome is Outcome.SUCCESS for r in result.rows])
     out: dict[str, float | None] = {}
     for src in SOURCES:

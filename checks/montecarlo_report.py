@@ -25,6 +25,10 @@ def _pyplot():  # type: ignore[no-untyped-def]
     return plt
 
 
+OUTCOME_COLOURS = {"success": "tab:green", "jam": "tab:red", "align_fail": "tab:orange",
+                   "timeout": "tab:purple", "overforce": "tab:brown", "sim_fault": "black"}
+
+
 def _column(result: MonteCarloResult, key: str) -> np.ndarray:
     return np.array([r.as_dict()[key] for r in result.rows], dtype=object)
 
@@ -39,10 +43,12 @@ def success_map(result: MonteCarloResult) -> str:
     fig, axes = _pyplot().subplots(1, 2, figsize=(12, 4.5))
     for ax, y, label in ((axes[0], tilt, "tilt between journal and hole at the start [deg]"),
                          (axes[1], clearance, "diametral clearance [um]")):
-        for k, name in enumerate(sorted(set(outcome), key=lambda n: n != "success")):
+        for name in sorted(set(outcome), key=lambda n: n != "success"):  # failures drawn on top
             sel = outcome == name
-            ax.scatter(lateral[sel], y[sel], s=8, alpha=0.6, label=f"{name} ({int(sel.sum())})",
-                       color="tab:green" if name == "success" else f"C{k + 1}")
+            ok = name == "success"
+            ax.scatter(lateral[sel], y[sel], s=8 if ok else 30, alpha=0.5 if ok else 0.9,
+                       marker="o" if ok else "x", label=f"{name} ({int(sel.sum())})",
+                       color=OUTCOME_COLOURS.get(name, "black"))
         ax.set_xlabel("true journal tip off the hole axis at the start [mm]")
         ax.set_ylabel(label)
         ax.legend(fontsize=8)
@@ -57,7 +63,8 @@ def force_plot(result: MonteCarloResult) -> str:
     peak = _column(result, "peak_force_n").astype(float)
     fig, ax = _pyplot().subplots(figsize=(7, 4))
     names = sorted(set(outcome), key=lambda n: n != "success")
-    ax.hist([peak[outcome == n] for n in names], bins=30, stacked=True, label=list(names))
+    ax.hist([peak[outcome == n] for n in names], bins=30, stacked=True, label=list(names),
+            color=[OUTCOME_COLOURS.get(n, "black") for n in names])
     ax.set_xlabel("peak contact force between part and plate [N]")
     ax.set_ylabel("trials")
     ax.legend(fontsize=8)
@@ -94,9 +101,9 @@ Seated first time: <b>{100 * result.success_rate:.2f} %</b> (Wilson 95 %: {100 *
 <h2>Where the failures lie</h2><img src="data:image/png;base64,{success_map(result)}">
 <h2>Peak forces</h2><img src="data:image/png;base64,{force_plot(result)}">
 <h2>Which error drives the failures</h2>
-<p>AUC: the probability that a failed trial drew a larger error from the source than a seated
-one (0.5: no bearing; 1: the failures are the large draws). Sizes: lateral errors and the
-clearance in metres, tilts in radians.</p>
+<p>AUC: the probability that a failed trial drew more of the source than a seated one (0.5: no
+bearing; near 1: the failures are the large draws; near 0: the small ones, as tight fits are
+for the clearance). Sizes: lateral errors and the clearance in metres, tilts in radians.</p>
 <table><tr><th>source</th><th>AUC</th><th>mean size, seated</th><th>mean size, failed</th></tr>{sens}</table>
 </body></html>"""
     path.write_text(doc)
