@@ -31,10 +31,11 @@ def _defaults() -> str:
 def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "montecarlo", help="first-pass yield by physics: N sampled insertion trials, batched",
-        description="Runs N insertion trials (step 6 from the tip 0.3 mm above the hole, the "
-                    "episode's arm, gripper, force-position controller and contact) with part "
-                    "diameters and cell errors drawn per trial; prints the share seated first "
-                    "time with its Wilson 95 %% interval, outcome counts and the error source "
+        description="Runs N insertion trials (step 6 from the hover, the tip 2.5 mm above the hole "
+                    "with the platform following it down to 0.3 mm, the episode's arm, gripper, "
+                    "force-position controller and contact) with part diameters and cell errors "
+                    "drawn per trial; prints the share seated first time with its Wilson 95 % "
+                    "interval, outcome counts and the error source "
                     f"that drives the failures. Error budget defaults: {_defaults()}.")
     p.add_argument("--config", metavar="DIST.yaml",
                    help="error budget: YAML with any fields of MonteCarloConfig (defaults above; "
