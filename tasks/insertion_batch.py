@@ -196,7 +196,7 @@ class _Runner:
                 rec = batch.rollout(substeps, control[active], record=("sensordata",), ids=active)
             except mujoco.batch.SimulationError as exc:
                 for i in active[batch.status[active] != 0]:
-                    s.fault[i] = batch.error(int(i)) or str(exc)
+                    s.fault[int(i)] = batch.error(int(i)) or str(exc)
                 rec = {"sensordata": np.zeros((active.size, substeps, model.nsensordata))}
             ctrl[active[:, None], arm.actuators] = new[active]
             sens = rec["sensordata"]

@@ -61,7 +61,8 @@ class TrialSlots:
         self.timed_out = np.zeros(n, dtype=bool)
         self.start, self.held = np.zeros((n, 3)), np.zeros((n, 3))
         self.peak, self.t_contact, self.lateral = np.zeros(n), np.full(n, np.nan), np.full(n, np.nan)
-        self.fault = [""] * n
+        self.fault: dict[int, str] = {}
+        """Why a slot's trial could not be finished (its slot: a fault ends only that trial)."""
         self.calls, self.shift = np.zeros(n, dtype=np.int64), np.zeros((n, 3))
         """Approach periods so far (the platform acts every FOLLOW_EVERY); where the platform
         last put the hole, against its start [m]."""
@@ -82,7 +83,7 @@ class TrialSlots:
         self.timed_out[slots], self.calls[slots], self.nring[slots] = False, 0, 0
         self.t_contact[slots], self.lateral[slots] = np.nan, np.nan
         for i in slots:
-            self.fault[i] = ""
+            self.fault.pop(int(i), None)
         self.rot[slots], self.axis[slots], self.goal[slots] = rot, axis, goal
         self.stop_after[slots], self.plate0[slots], self.mouth_radius[slots] = stop_after, plate0, mouth_radius
 
@@ -177,13 +178,11 @@ def health(batch: mujoco.batch.Batch, s: TrialSlots, active: NDArray[np.intp], q
     warned = batch.warning[active, :, 0].sum(axis=1) > 0  # (nsim, mjNWARNING, [number, info])
     v = qvel[active]
     bad = warned | ~np.isfinite(v).all(axis=1) | (np.abs(np.nan_to_num(v, nan=np.inf)).max(axis=1) > MAX_SPEED)
-    for i in active[bad]:
-        if not s.fault[i]:
-            s.fault[i] = ("MuJoCo warning" if warned[np.flatnonzero(active == i)[0]] else
-                          "state blew up or went non-finite") + f" at t = {s.t[i]:.3f} s"
-    for i in active:
-        if s.fault[i]:
-            s.phase[i] = DONE
+    for k in np.flatnonzero(bad):  # rare: the per-trial loop runs only over the broken ones
+        s.fault.setdefault(int(active[k]), ("MuJoCo warning" if warned[k] else "state blew up or went "
+                                             "non-finite") + f" at t = {s.t[active[k]]:.3f} s")
+    for i in s.fault:
+        s.phase[i] = DONE
 
 
 def classify(batch: mujoco.batch.Batch, s: TrialSlots, slots: NDArray[np.intp], ids: TrialIds,
@@ -199,8 +198,8 @@ def classify(batch: mujoco.batch.Batch, s: TrialSlots, slots: NDArray[np.intp], 
     for i in slots:
         t_ins = s.t[i] - s.t_contact[i] if np.isfinite(s.t_contact[i]) else float("nan")
         lateral, peak, short = s.lateral[i] * 1e3, float(s.peak[i]), float(shoulder[i])
-        if s.fault[i]:
-            outcome, reason = Outcome.SIM_FAULT, s.fault[i]
+        if int(i) in s.fault:
+            outcome, reason = Outcome.SIM_FAULT, s.fault[int(i)]
         elif peak > ins.damage_force_n:
             outcome, reason = Outcome.OVERFORCE, f"peak {peak:.1f} N > {ins.damage_force_n:g} N"
         elif short <= ins.seat_tolerance:

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+from controller_support import rotation
 
 from serpar.controllers.arm_controller import ArmController, ControlLaw, controller_config
 from serpar.controllers.arm_laws import CartesianTarget, ForceTarget
@@ -29,14 +30,6 @@ SIGNALS = ("tau", "wrench", "push", "offset", "q", "dq", "tau_J")
 CASES = {"ideal": (False, 0), "noise_seed3": (True, 3)}
 MEASURED = ("q", "dq", "tau_J")
 """Kept for the noisy case only (the ideal case's measurement is the plant's, and feeds tau)."""
-
-
-def _rotation(rotvec: np.ndarray) -> np.ndarray:
-    quat, mat = np.zeros(4), np.zeros(9)
-    angle = float(np.linalg.norm(rotvec))
-    mujoco.mju_axisAngle2Quat(quat, rotvec / angle, angle)
-    mujoco.mju_quat2Mat(mat, quat)
-    return mat.reshape(3, 3)
 
 
 def closed_loop(noise: bool, seed: int) -> dict[str, np.ndarray]:
@@ -57,7 +50,7 @@ def closed_loop(noise: bool, seed: int) -> dict[str, np.ndarray]:
         if k == 60:
             pos, rot = ctrl.nominal.tcp_pose()
             target = CartesianTarget(pos + np.array([0.02, -0.01, 0.015]),
-                                     _rotation(np.array([0.015, -0.025, 0.04])) @ rot,
+                                     rotation(np.array([0.015, -0.025, 0.04])) @ rot,
                                      vel=np.array([0.01, 0.0, -0.01, 0.0, 0.02, 0.0]),
                                      acc=np.array([0.0, 0.1, 0.0, 0.05, 0.0, 0.0]))
             ctrl.track(target, ControlLaw.IMPEDANCE)

@@ -11,6 +11,7 @@ import math
 import mujoco
 import numpy as np
 import pytest
+from controller_support import rotation
 from mujoco.batch import Batch
 
 from serpar.controllers import arm_laws, batch_laws
@@ -32,14 +33,6 @@ from serpar.sim.arm import HOME_Q, build_arm_spec
 from serpar.sim.arm_drive import ArmIndex
 
 CONFIG = ArmControllerConfig()
-
-
-def _rotation(rotvec: np.ndarray) -> np.ndarray:
-    quat, mat = np.zeros(4), np.zeros(9)
-    angle = float(np.linalg.norm(rotvec))
-    mujoco.mju_axisAngle2Quat(quat, rotvec / angle, angle)
-    mujoco.mju_quat2Mat(mat, quat)
-    return mat.reshape(3, 3)
 
 
 def _worst(a: np.ndarray, b: np.ndarray) -> float:
@@ -118,10 +111,10 @@ def test_atan2_is_the_c_librarys() -> None:
 
 def test_orientation_error_equals_mujoco_quaternions() -> None:
     rng = np.random.default_rng(2)
-    rot = np.stack([_rotation(rng.normal(0.0, 2.0, 3)) for _ in range(400)])
-    target = np.stack([_rotation(rng.normal(0.0, 2.0, 3)) for _ in range(400)])
+    rot = np.stack([rotation(rng.normal(0.0, 2.0, 3)) for _ in range(400)])
+    target = np.stack([rotation(rng.normal(0.0, 2.0, 3)) for _ in range(400)])
     target[:50] = rot[:50]  # no error
-    target[50:100] = np.stack([_rotation(np.array([np.pi - 1e-9, 0, 0])) @ r for r in rot[50:100]])
+    target[50:100] = np.stack([rotation(np.array([np.pi - 1e-9, 0, 0])) @ r for r in rot[50:100]])
     ours = batch_laws.orientation_error(rot, target)  # 400 rows: the vectorised copy
     single = np.stack([arm_laws.orientation_error(a, b) for a, b in zip(rot, target)])
     assert _worst(ours, single) <= 1e-12
@@ -146,7 +139,7 @@ def test_a_trials_law_is_the_same_in_any_batch(seed: int) -> None:
     assert batch_laws.ROWWISE_MAX < 9
     cart = BatchCartesianTarget(
         terms.pos + rng.normal(0.0, 0.02, (n, 3)),
-        np.stack([_rotation(rng.normal(0.0, 0.3, 3)) @ r for r in terms.rot]),
+        np.stack([rotation(rng.normal(0.0, 0.3, 3)) @ r for r in terms.rot]),
         rng.normal(0.0, 0.05, (n, 6)), rng.normal(0.0, 0.2, (n, 6)))
     axis = rng.normal(size=(n, 3))
     force = BatchForceTarget(axis / np.linalg.norm(axis, axis=1)[:, None], rng.uniform(0, 8, n))
@@ -193,7 +186,7 @@ def _run_single(model: mujoco.MjModel, index: ArmIndex, noise: bool, seed: int) 
     for k in range(HOLD + IMPEDANCE + FORCE_POSITION):
         if k == HOLD:
             pos, rot = ctrl.nominal.tcp_pose()
-            target = CartesianTarget(pos + OFFSET, _rotation(TURN) @ rot)
+            target = CartesianTarget(pos + OFFSET, rotation(TURN) @ rot)
             ctrl.track(target, ControlLaw.IMPEDANCE)
         if k == HOLD + IMPEDANCE:  # nothing to push on: the force loop still runs
             ctrl.tare()
@@ -218,7 +211,7 @@ def _run_batch(model: mujoco.MjModel, index: ArmIndex, noise: bool,
     for k in range(HOLD + IMPEDANCE + FORCE_POSITION):
         if k == HOLD:
             pos, rot = ctrl.nominal.tcp_pose()
-            ctrl.track(pos + OFFSET, _rotation(TURN) @ rot)
+            ctrl.track(pos + OFFSET, rotation(TURN) @ rot)
         if k == HOLD + IMPEDANCE:
             ctrl.tare()
             ctrl.track(ctrl.cart_pos.copy(), ctrl.cart_rot.copy(), law=ControlLaw.FORCE_POSITION,
