@@ -149,11 +149,21 @@ class _Trials(Sequence[Trial]):
         if isinstance(i, slice):
             return [self[j] for j in range(*i.indices(len(self)))]
         k = self.first + int(i)
-        # every trial's inverse kinematics from the same guess: the arm has one redundant
-        # joint, so the elbow a solution lands on depends on where the search started
-        (model,), (start,), (sample,) = prepare(self.cfg, self.seed, range(k, k + 1), np.array(HOME_Q))
-        self.samples[k] = (sample, start)
-        return Trial(model, start, trial_seeds(self.seed, [k])[0], sample.draw.hole_diameter)
+        trial, sample = _build(self.cfg, self.seed, k)
+        self.samples[k] = (sample, trial.start)
+        return trial
+
+
+def _build(cfg: MonteCarloConfig, seed: int, k: int) -> tuple[Trial, TrialSample]:
+    # every trial's inverse kinematics from the same guess: the arm has one redundant joint,
+    # so the elbow a solution lands on depends on where the search started
+    (model,), (start,), (sample,) = prepare(cfg, seed, range(k, k + 1), np.array(HOME_Q))
+    return Trial(model, start, trial_seeds(seed, [k])[0], sample.draw.hole_diameter), sample
+
+
+def build_trial(cfg: MonteCarloConfig, seed: int, k: int) -> Trial:
+    """Trial ``k`` of seed ``seed``, exactly as a run builds it."""
+    return _build(cfg, seed, k)[0]
 
 
 def run_block(cfg: MonteCarloConfig, seed: int, first: int, stop: int, threads: int = 1,

@@ -6,9 +6,11 @@ import argparse
 import dataclasses
 import os
 import sys
+from pathlib import Path
 
 from serpar.checks.montecarlo import BATCH, MonteCarloResult, run_montecarlo, write_parquet
 from serpar.checks.montecarlo_config import MonteCarloConfig
+from serpar.checks.montecarlo_record import FOLDER, failed_rows, record_failed
 from serpar.checks.montecarlo_report import sensitivity_rows, write_montecarlo_report
 from serpar.checks.montecarlo_validation import validate
 from serpar.cli import arg_types
@@ -20,7 +22,8 @@ from serpar.sim.config_io import load_yaml_config
 from serpar.sim.strict_json import dumps
 
 OUT_FILES = ("trials.parquet", "summary.json")
-"""What --out DIR holds."""
+"""What --out DIR holds (and FOLDER/trial_<k>.rrd, the failed trials recorded)."""
+RECORD_FAILED = 10
 
 
 def _defaults() -> str:
@@ -54,8 +57,12 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="instead: run a HOLES-hole episode (seed --seed) and replay each of its "
                         "insertions as a trial from the state it started in; prints outcomes and "
                         "peak forces side by side")
-    p.add_argument("--out", metavar="DIR", help="write DIR/trials.parquet (one row per trial) and "
-                                                "DIR/summary.json")
+    p.add_argument("--out", metavar="DIR", help="write DIR/trials.parquet (one row per trial), "
+                                                f"DIR/summary.json and the failed trials' recordings, "
+                                                f"DIR/{FOLDER}/trial_<k>.rrd")
+    p.add_argument("--record-failed", type=int, metavar="K", default=None,
+                   help=f"with --out: re-run the first K failed trials alone and record each for "
+                        f"`serpar replay` (default {RECORD_FAILED}; 0: none)")
     p.add_argument("--report", metavar="OUT.html", help="HTML report with the plots")
     add_force(p)
     p.add_argument("--json", action="store_true", help="one JSON summary object")
@@ -86,6 +93,10 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
         return _validate(args)
     cfg = load_yaml_config(MonteCarloConfig, args.config) if args.config else MonteCarloConfig()
     out = out_folder(args.out, "--out", args.force, OUT_FILES) if args.out else None
+    if args.record_failed is not None and (args.record_failed < 0 or out is None):
+        raise ConfigError(f"--record-failed {args.record_failed}: a count >= 0, with --out DIR "
+                          "(the recordings go to DIR/failed/)")
+    record = RECORD_FAILED if args.record_failed is None else args.record_failed
     report = out_file(args.report, "--report", args.force, suffix=".html") if args.report else None
     bar = progress(args.trials, "trials", enabled=sys.stderr.isatty())
 
@@ -107,11 +118,14 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
                          "finished and are reported\n")
     if not result.rows:
         raise ConfigError("no trial finished")
-    info = summary(result)
+    info = summary(result) | {"recorded": []}
     if out is not None:
         out.clear()
         out.path.mkdir(parents=True, exist_ok=True)
+        for stale in (out.path / FOLDER).glob("trial_*.rrd"):
+            stale.unlink()
         write_parquet(result, out.path / OUT_FILES[0])
+        info["recorded"] = _record(result, out.path, record)
         (out.path / OUT_FILES[1]).write_text(dumps(info, indent=2) + "\n")
     if report is not None:
         write_montecarlo_report(result, report)
@@ -128,10 +142,39 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
         print("seed 001's error budget on this arm: " + "; ".join(
             f"P(|dP| < {d} mm) = {within[d]:.4f} (paper, its robot: {paper[d]})" for d in within)  # type: ignore[index]
             + f"; P(seated) = {s001['p_seated']:.4f}")
+    _say_recorded(info.get("recorded", []), len(failed_rows(result)))
     print(table(["error source", "AUC (failed vs seated)", "mean seated", "mean failed"],
                 [[s, "-" if a is None else f"{a:.3f}", f"{ok:.4g}", f"{bad:.4g}"]
                  for s, a, ok, bad in sensitivity_rows(result)]))
     return 0
+
+
+def _record(result: MonteCarloResult, out: Path, limit: int) -> list[dict[str, object]]:
+    """Record up to ``limit`` failed trials; Ctrl-C keeps the ones recorded."""
+    n = min(limit, len(failed_rows(result)))
+    done: list[dict[str, object]] = []
+    if not n:
+        return done
+    bar = progress(n, "recording failed trials", enabled=sys.stderr.isatty())
+    try:
+        for d in record_failed(result, out, limit):
+            done.append(d)
+            bar.update(1)
+    except KeyboardInterrupt:
+        sys.stderr.write(f"serpar montecarlo: recording interrupted; {len(done)} of {n} failed trials "
+                         "recorded\n")
+    bar.close()
+    for d in done:
+        if d["rerun_outcome"] != d["outcome"]:
+            sys.stderr.write(f"serpar montecarlo: trial {d['trial']} re-ran as {d['rerun_outcome']}, "
+                             f"not {d['outcome']}: {d['file']} shows the re-run\n")
+    return done
+
+
+def _say_recorded(recorded: list, failed: int) -> None:
+    if recorded:
+        print(f"{len(recorded)} of {failed} failed trials recorded: serpar replay {recorded[0]['file']}"
+              + (" (and the others beside it)" if len(recorded) > 1 else ""))
 
 
 def _validate(args: argparse.Namespace) -> int:

@@ -15,7 +15,8 @@ DEFAULT_PORT = 9090
 
 
 def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("replay", help="open an episode recording (episode.rrd of run --record) in the "
+    p = sub.add_parser("replay", help="open an episode recording (episode.rrd of run --record, or a failed "
+                                      "trial of montecarlo --out: DIR/failed/trial_<k>.rrd) in the "
                                       "rerun viewer, or serve it to a browser with --web")
     p.add_argument("file", metavar="FILE.rrd", help="a rerun recording, e.g. DIR/episode_0/episode.rrd; "
                                                     "a truncated or corrupt file is refused")

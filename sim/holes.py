@@ -118,7 +118,6 @@ def add_grid_plate(
     The window (half-size `window`) is filled by the bore's ring boxes. Plate bottom at
     z = 0, top at z = thickness. `centres` is (rows, cols, 2). Returns the geom count.
     """
-    rows, cols = centres.shape[:2]
     xs, ys = centres[0, :, 0], centres[:, 0, 1]
     x_lo, x_hi = xs.min() - pitch / 2 - margin, xs.max() + pitch / 2 + margin
     y_lo, y_hi = ys.min() - pitch / 2 - margin, ys.max() + pitch / 2 + margin

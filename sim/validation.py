@@ -22,8 +22,8 @@ from serpar.sim.tolerances import HOLE_H7, JOURNAL_H6
 
 # The widest H7/h6 pair (16 um diametral) is the worst case for jamming offsets and
 # penetration; a tight pair (2 um) tests that nothing spurious blocks an aligned journal.
-LOOSE = dict(hole_diameter=HOLE_H7.max, journal_diameter=JOURNAL_H6.min)
-TIGHT = dict(hole_diameter=HOLE_H7.min + 1e-6, journal_diameter=JOURNAL_H6.max - 1e-6)
+LOOSE = {"hole_diameter": HOLE_H7.max, "journal_diameter": JOURNAL_H6.min}
+TIGHT = {"hole_diameter": HOLE_H7.min + 1e-6, "journal_diameter": JOURNAL_H6.max - 1e-6}
 
 
 @dataclass(frozen=True)

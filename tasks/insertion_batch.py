@@ -87,17 +87,19 @@ class Trial:
 
 def run_trials(trials: Sequence[Trial], chamfer: float, cfg: TrialConfig = TrialConfig(),
                nthread: int = 1, on_period: Callable[[int], None] | None = None,
-               slots: int | None = None, on_result: Callable[[int, TrialResult], None] | None = None
+               slots: int | None = None, on_result: Callable[[int, TrialResult], None] | None = None,
+               probe: Callable[[mujoco.batch.Batch, TrialSlots], None] | None = None
                ) -> list[TrialResult]:
     """Run ``trials`` to their ends in ``slots`` simulations at a time (default: all at once),
     each started as a slot frees (their models must share one spec's sizes; the bore's entry
     ``chamfer`` [m]); ``on_period(active)`` after every control period, ``on_result(i, r)`` as
     trial i ends. Each trial is read from ``trials`` once, when its slot takes it (a lazy
-    sequence builds its scene then)."""
+    sequence builds its scene then). ``probe(batch, slots)`` sees the plant and the trials'
+    states after every period, before ended trials leave their slots (a recorder's hook)."""
     if not trials:
         raise ConfigError("run_trials needs at least one trial")
     runner = _Runner(trials, chamfer, cfg, nthread, min(len(trials), slots or len(trials)))
-    return runner.run(on_period, on_result)
+    return runner.run(on_period, on_result, probe)
 
 
 @dataclass
@@ -175,7 +177,8 @@ class _Runner:
             self._load(ended[:waiting])
 
     def run(self, on_period: Callable[[int], None] | None,
-            on_result: Callable[[int, TrialResult], None] | None) -> list[TrialResult]:
+            on_result: Callable[[int, TrialResult], None] | None,
+            probe: Callable[[mujoco.batch.Batch, TrialSlots], None] | None = None) -> list[TrialResult]:
         self._load(np.arange(self.n))
         batch, arm, ins, s, ctl = self.batch, self.arm, self.cfg.insertion, self.s, self.ctl
         qpos, qvel, ctrl, mocap = batch.bind("qpos"), batch.bind("qvel"), batch.bind("ctrl"), batch.bind("mocap_pos")
@@ -206,6 +209,8 @@ class _Runner:
             score(batch, s, active, force, self.ids)
             stall(ctl, s, active, ins)
             health(batch, s, active, qvel)
+            if probe is not None:
+                probe(batch, s)
             if on_period is not None:
                 on_period(int(active.size))
             self._finish(on_result)

@@ -130,9 +130,13 @@ class PoseTrack:
         self.bodies = np.array([model.body(name).id for name in self.names])
 
     def sample(self, data: mujoco.MjData, t: float) -> None:
+        self.add(t, data.xpos, data.xquat)
+
+    def add(self, t: float, xpos: np.ndarray, xquat: np.ndarray) -> None:
+        """A sample from one simulation's body poses (nbody x 3, nbody x 4), e.g. a batch's row."""
         self._t.append(t)
-        self._pos.append(data.xpos[self.bodies])
-        self._quat.append(data.xquat[self.bodies])
+        self._pos.append(xpos[self.bodies])
+        self._quat.append(xquat[self.bodies])
 
     def send(self, rec: rr.RecordingStream) -> None:
         """Per body only the samples where it moved (resting and sleeping parts cost nothing)."""

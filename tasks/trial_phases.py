@@ -88,7 +88,8 @@ class TrialSlots:
         self.stop_after[slots], self.plate0[slots], self.mouth_radius[slots] = stop_after, plate0, mouth_radius
 
 
-def _in_hole_frame(xpos: Arr, xmat: Arr, site: int, hole: int) -> Arr:
+def in_hole_frame(xpos: Arr, xmat: Arr, site: int, hole: int) -> Arr:
+    """A site's position in the hole's frame (x, y across the axis, z up it), per slot [m]."""
     rot = xmat[:, hole].reshape(-1, 3, 3)
     return np.einsum("nji,nj->ni", rot, xpos[:, site] - xpos[:, hole])
 
@@ -148,7 +149,7 @@ def score(batch: mujoco.batch.Batch, s: TrialSlots, active: NDArray[np.intp], fo
     first = active[(force > CONTACT_FORCE_N) & np.isnan(s.t_contact[active])]
     if first.size:
         xpos, xmat = batch.bind("site_xpos")[first], batch.bind("site_xmat")[first]
-        tip = _in_hole_frame(xpos, xmat, ids.tip_site, ids.hole_site)
+        tip = in_hole_frame(xpos, xmat, ids.tip_site, ids.hole_site)
         s.t_contact[first], s.lateral[first] = s.t[first], np.hypot(tip[:, 0], tip[:, 1])
 
 
@@ -191,8 +192,8 @@ def classify(batch: mujoco.batch.Batch, s: TrialSlots, slots: NDArray[np.intp], 
     sim_fault."""
     batch.forward(ids=slots)
     xpos, xmat = batch.bind("site_xpos"), batch.bind("site_xmat")
-    shoulder = _in_hole_frame(xpos, xmat, ids.shoulder_site, ids.hole_site)[:, 2]
-    tip = _in_hole_frame(xpos, xmat, ids.tip_site, ids.hole_site)
+    shoulder = in_hole_frame(xpos, xmat, ids.shoulder_site, ids.hole_site)[:, 2]
+    tip = in_hole_frame(xpos, xmat, ids.tip_site, ids.hole_site)
     tip_depth, tip_off = -tip[:, 2], np.hypot(tip[:, 0], tip[:, 1])
     out = []
     for i in slots:

@@ -21,8 +21,8 @@ def _lint_imports(cwd: Path, pythonpath: Path | None = None) -> subprocess.Compl
     env = None
     if pythonpath is not None:
         env = {**os.environ, "PYTHONPATH": str(pythonpath)}
-    cmd = [sys.executable, "-c", "import sys; from importlinter.cli import lint_imports_command; "
-           "sys.exit(lint_imports_command())", "--no-cache"]
+    cmd = [sys.executable, "-c", ("import sys; from importlinter.cli import lint_imports_command; "
+                                  "sys.exit(lint_imports_command())"), "--no-cache"]
     return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, check=False, timeout=120)
 
 

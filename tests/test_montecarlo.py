@@ -4,16 +4,18 @@ count or batch size, and the command's summary holds what the issue asks."""
 from __future__ import annotations
 
 import contextlib
-import functools
+import copy
 import dataclasses
+import functools
 import io
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from serpar.checks.bench_montecarlo import montecarlo_bench
-from serpar.checks.montecarlo import run_montecarlo, scene_config, trial_config
+from serpar.checks.montecarlo import build_trial, run_montecarlo, scene_config, trial_config
 from serpar.checks.montecarlo_config import MonteCarloConfig, draw_trial
 from serpar.checks.montecarlo_validation import validate
 from serpar.cli.entry import main
@@ -24,6 +26,8 @@ from serpar.sim.tolerances import BODY_H6, HOLE_H7, JOURNAL_H6
 from serpar.sim.trial_scene import TrialIds, build_trial_spec
 from serpar.tasks.episode_config import Outcome
 from serpar.tasks.insertion_batch import Trial, run_trials
+from serpar.tasks.replay_server import entity_paths
+from serpar.tasks.trial_recording import record_trial
 from serpar.tasks.trial_start import TrialDraw, plan_start
 
 CFG = MonteCarloConfig()
@@ -32,8 +36,8 @@ OFFSETS_MM = (0.0, 0.1, 0.35, 0.5)
 0.1 mm tip chamfer ~ 0.2 mm) and beyond it."""
 
 
-@pytest.fixture(scope="module")
-def offsets() -> list:
+@functools.cache
+def offsets_trials() -> list[Trial]:
     """Trials that differ only in where the hole is, a 10 um clearance."""
     scene = scene_config(CFG)
     hole, journal = HOLE_H7.nominal + 6e-6, JOURNAL_H6.nominal - 4e-6
@@ -45,7 +49,12 @@ def offsets() -> list:
         start = plan_start(model, TrialIds.of(model), draw, np.asarray(scene.entry),
                            scene.conductor.journal_length, np.array(HOME_Q))
         trials.append(Trial(model, start, trial_seeds(0, [k])[0], hole))
-    return run_trials(trials, scene.chamfer, trial_config(CFG), nthread=2)
+    return trials
+
+
+@pytest.fixture(scope="module")
+def offsets() -> list:
+    return run_trials(offsets_trials(), scene_config(CFG).chamfer, trial_config(CFG), nthread=2)
 
 
 @pytest.mark.slow
@@ -106,6 +115,57 @@ def test_the_command_prints_one_summary_with_the_asked_keys(tmp_path) -> None:
     assert summary["wall_s"] > 0
     assert summary["seed001"]["p_position_within_mm"]["0.15"] == 0.0
     assert (tmp_path / "mc" / "trials.parquet").is_file() and (tmp_path / "mc.html").is_file()
+    # both failed trials re-run alone end as they did in the batch, recorded for serpar replay
+    assert [(r["trial"], r["outcome"], r["rerun_outcome"]) for r in summary["recorded"]] == [
+        (0, "align_fail", "align_fail"), (1, "align_fail", "align_fail")]
+    assert all(Path(r["file"]).is_file() for r in summary["recorded"])
+
+
+@pytest.mark.slow
+def test_a_failed_trial_recorded_alone_shows_what_the_batch_scored(offsets, tmp_path) -> None:
+    """The trial 0.5 mm off, re-run by itself into a rerun file: the same outcome as in the
+    batch of four, and the file's signals show it: the tip from 2.5 mm above to the rim, still
+    ~0.5 mm off the axis, pressed with the push force."""
+    trial, ran = offsets_trials()[3], offsets[3]
+    path = tmp_path / "trial_3.rrd"
+    again = record_trial(trial, scene_config(CFG).chamfer, trial_config(CFG), path, "trial 3",
+                         expected=ran.outcome.value)
+    assert again == ran
+    paths, note = entity_paths(path)
+    assert note is None
+    assert {"/cell/conductor0/conductor", "/cell/plate/baseplate", "/signals/tip", "/signals/plate_force",
+            "/phase", "/events"} <= set(paths)
+    series = _series(path)
+    tip, force = np.array(series["/signals/tip"]), np.array(series["/signals/plate_force"]).ravel()
+    assert abs(tip[0, 2] - 2.5) < 0.1 and -0.2 < tip[-1, 2] < 0.2  # from the hover onto the rim
+    assert abs(np.hypot(tip[-1, 0], tip[-1, 1]) - OFFSETS_MM[3]) < 0.1
+    assert 3.0 < force.max() < 8.0  # the 5 N push on the rim
+
+
+def _series(path: Path) -> dict[str, list]:
+    from rerun.chunk import RrdReader
+    out: dict[str, list] = {}
+    for chunk in RrdReader(path).store().stream():
+        batch = chunk.to_record_batch()
+        if "Scalars:scalars" in batch.schema.names:
+            out.setdefault(chunk.entity_path, []).extend(batch.column("Scalars:scalars").to_pylist())
+    return out
+
+
+@pytest.mark.slow
+def test_a_trial_the_simulator_cannot_finish_ends_as_a_fault_and_spares_its_neighbour() -> None:
+    """Negative damping on the elbow (a plant that feeds energy in) blows trial 1 up: it ends
+    as sim_fault with the reason, and trial 0 beside it ends exactly as it does alone."""
+    good, base = build_trial(CFG, 0, 0), build_trial(CFG, 0, 1)
+    model = copy.copy(base.model)
+    model.dof_damping[TrialIds.of(model).arm_dof[3]] = -200.0
+    broken = Trial(model, base.start, base.seed, base.hole_diameter)
+    chamfer, cfg = scene_config(CFG).chamfer, trial_config(CFG)
+    both = run_trials([good, broken], chamfer, cfg, nthread=2)
+    assert both[1].outcome is Outcome.SIM_FAULT
+    assert "blew up" in both[1].reason or "MuJoCo warning" in both[1].reason
+    assert both[0] == run_trials([good], chamfer, cfg)[0]
+    assert both[0].outcome is Outcome.SUCCESS
 
 
 def test_bad_input_is_one_line(capsys) -> None:
