@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from serpar.errors import ConfigError
+from serpar.sim.arm import TORQUE_AXIS
 from serpar.sim.arm_drive import ArmIndex
 
 Vec = NDArray[np.float64]
@@ -78,9 +79,17 @@ class TorqueADC:
     (0, 2, 1/2, 1, ..., 1, 1/2, 2) / n: centred on the period's middle, summing to one.
     A plain mean of the samples (or one sample) reads 25-50 us late or early against the
     period mean the diagnosis assumes (diagnosis/arm_dynamics_signals.py), which an
-    effect-free episode then shows as sensor timing."""
+    effect-free episode then shows as sensor timing.
 
-    def __init__(self, index: ArmIndex, substeps: int) -> None:
+    A sensor with a MuJoCo ``delay`` of at least one step reads its history, linearly
+    interpolated, ``delay`` ago: its command switches arrive inside the period, where the
+    extrapolating ends would straddle them (at a 0.1 ms step a 0.712 ms lag then reads as
+    0.709 ms, 0.817 ms as 0.796 ms). Its period is already in the past, so its mean is the
+    plain trapezoid (1/2, 1, ..., 1, 1/2) / n over the delayed readings at the substep starts
+    and the period's end, read from the history (``mj_readSensor`` at the end's time): exact
+    for the interpolated history, whose switch ramps the trapezoid integrates exactly."""
+
+    def __init__(self, index: ArmIndex, substeps: int, model: mujoco.MjModel | None = None) -> None:
         if substeps < 4:
             raise ConfigError(f"TorqueADC needs >= 4 physics substeps per control period, got {substeps}")
         adr = np.asarray(index.torque_adr)
@@ -95,16 +104,39 @@ class TorqueADC:
         w[-1] += 1.0  # half the end value, extrapolated forward: 2 x[n-1] - x[n-2], halved
         w[-2] -= 0.5  # with 4 substeps both inner corrections fall on one sample: (0, 2, 0, 2) / 4
         self.weights = w / substeps
+        """The weights of a sensor without delay (the batched trials use them)."""
+        delay = (np.zeros(len(adr)) if model is None
+                 else np.asarray(model.sensor_delay[np.asarray(index.torque_sensors)], float))
+        self.delayed = np.flatnonzero(delay >= model.opt.timestep) if model is not None else np.zeros(0, int)
+        """Sensors (joint indices) whose period mean is the delayed trapezoid."""
+        self._weights = np.repeat(self.weights[:, None], len(adr), axis=1)  # substep x sensor
+        if self.delayed.size:
+            trapezoid = np.ones(substeps)
+            trapezoid[0] = 0.5
+            self._weights[:, self.delayed] = (trapezoid / substeps)[:, None]
+            sensors = np.asarray(index.torque_sensors)[self.delayed]
+            self._ends = [(int(k), int(s), np.zeros(int(model.sensor_dim[s])))  # type: ignore[union-attr]
+                          for k, s in zip(self.delayed, sensors)]
+        self._end_weight = 0.5 / substeps
         self._sum = np.zeros(len(adr))
         self._n = 0
 
-    def sample(self, data: mujoco.MjData, substep: int) -> None:
-        """After physics substep `substep` (0-based) of the period: its start's torque."""
+    def sample(self, data: mujoco.MjData, substep: int, model: mujoco.MjModel | None = None) -> None:
+        """After physics substep `substep` (0-based) of the period: its start's torque (and,
+        after the last, a delayed sensor's reading at the period's end, from ``model``'s
+        history)."""
+        reading = data.sensordata[self._slice] if self._even else data.sensordata[self._adr]
         if substep == 0:
-            self._sum[:] = 0.0  # weight 0: the switch sample; a new period starts
+            self._sum[:] = self._weights[0] * reading  # a new period starts
         else:
-            reading = data.sensordata[self._slice] if self._even else data.sensordata[self._adr]
-            self._sum += self.weights[substep] * reading
+            self._sum += self._weights[substep] * reading
+        if self.delayed.size and substep == len(self.weights) - 1:
+            if model is None:
+                raise ConfigError("TorqueADC: a delayed torque sensor's period end is read from "
+                                  "the model's history; pass the model to sample()")
+            for k, sensor, out in self._ends:
+                value = mujoco.mj_readSensor(model, data, sensor, data.time, out, 1)
+                self._sum[k] += self._end_weight * (out if value is None else value)[TORQUE_AXIS]
         self._n = substep + 1
 
     def mean(self) -> Vec | None:

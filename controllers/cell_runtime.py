@@ -139,6 +139,7 @@ class CellRuntime:
         model."""
         if self.drive is not None:
             self.drive = DriveFriction.of_arm(scene.model, names.ARM, self.drive.scale)
+        self._adcs.clear()  # the next ones read the sensors' delays from the new model
         if self.gate is not None:
             self.gate.bind(scene.model, scene.data)
         if self.transit is not None:
@@ -171,7 +172,7 @@ class CellRuntime:
                 self._match_step()
         if self._adc is None or len(self._adc.weights) != self.arm.substeps:
             self._adc = self._adcs.get(self.arm.substeps) or self._adcs.setdefault(
-                self.arm.substeps, TorqueADC(self.arm.index, self.arm.substeps))
+                self.arm.substeps, TorqueADC(self.arm.index, self.arm.substeps, m))
         motors = self.arm.index.actuators
         held = d.ctrl[motors]  # a copy: the command of the period that ends now
         self.arm.update(m, d)
@@ -186,7 +187,7 @@ class CellRuntime:
             if drive is not None:
                 drive(d)
             mujoco.mj_step(m, d)
-            adc.sample(d, s)
+            adc.sample(d, s, m)
             if probe is not None:
                 probe()
             if s == 0:  # after the switch substep: the command alone

@@ -33,6 +33,8 @@ class ArmIndex:
     tcp_site: int
     torque_adr: NDArray[np.int64]
     """sensordata address of each joint torque (the joint-axis component of tau_J{i})."""
+    torque_sensors: NDArray[np.int64]
+    """Sensor id of each tau_J{i} (its ``delay``, its history)."""
 
     @classmethod
     def from_model(cls, model: mujoco.MjModel, prefix: str = "") -> ArmIndex:
@@ -50,6 +52,7 @@ class ArmIndex:
             actuators=np.array([lookup(mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in ACTUATOR_NAMES]),
             tcp_site=lookup(mujoco.mjtObj.mjOBJ_SITE, TCP_SITE),
             torque_adr=np.array([model.sensor_adr[s] + TORQUE_AXIS for s in sensors]),
+            torque_sensors=np.array(sensors),
         )
 
 

@@ -21,7 +21,9 @@ from serpar.checks.montecarlo_validation import validate
 from serpar.cli.entry import main
 from serpar.controllers.batch_sensors import trial_seeds
 from serpar.errors import ConfigError
+from serpar.sim import names
 from serpar.sim.arm import HOME_Q
+from serpar.sim.arm_drive import ArmIndex
 from serpar.sim.tolerances import BODY_H6, HOLE_H7, JOURNAL_H6
 from serpar.sim.trial_scene import TrialIds, build_trial_spec
 from serpar.tasks.episode_config import Outcome
@@ -166,6 +168,17 @@ def test_a_trial_the_simulator_cannot_finish_ends_as_a_fault_and_spares_its_neig
     assert "blew up" in both[1].reason or "MuJoCo warning" in both[1].reason
     assert both[0] == run_trials([good], chamfer, cfg)[0]
     assert both[0].outcome is Outcome.SUCCESS
+
+
+def test_a_trial_with_delayed_torque_sensors_is_refused() -> None:
+    """The batch's period mean is the undelayed sensors' (TorqueADC.weights): a delayed one
+    would be misread, so it is refused, not run."""
+    base = build_trial(CFG, 0, 0)
+    model = copy.copy(base.model)
+    model.sensor_delay[ArmIndex.from_model(model, names.ARM).torque_sensors] = 1e-3
+    with pytest.raises(ConfigError, match="torque sensors have a delay"):
+        run_trials([Trial(model, base.start, base.seed, base.hole_diameter)], scene_config(CFG).chamfer,
+                   trial_config(CFG))
 
 
 def test_bad_input_is_one_line(capsys) -> None:
