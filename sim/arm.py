@@ -73,6 +73,8 @@ FINGER_OPENING_MAX = 0.04
 """Travel of each finger [m] (jaw width 0..80 mm)."""
 FLANGE_SITE = "flange"
 TCP_SITE = "tcp"
+BASE_BODY = "link0"
+"""The arm's root body (its base, fixed where the arm is attached)."""
 TCP_OFFSET = 0.1034
 """Flange-to-grasp-point distance [m] along the flange z (Franka Hand default EE frame)."""
 

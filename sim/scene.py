@@ -123,9 +123,11 @@ def _emissive(spec: mujoco.MjSpec) -> str:
 
 
 def attach_cell_arm(spec: mujoco.MjSpec, physics: PhysicsConfig, joint_friction: tuple[float, ...] = (),
-                    plant: ArmPlantChanges | None = None) -> None:
-    """The cell's arm at the world origin (prefix ``arm/``): its joints' dry friction, a
-    diagnosed plant over it, the friction rows' stiffness and the pads' contact softness."""
+                    plant: ArmPlantChanges | None = None,
+                    base: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+    """The cell's arm with its base at ``base`` (the world origin in the cell; prefix ``arm/``):
+    its joints' dry friction, a diagnosed plant over it, the friction rows' stiffness and the
+    pads' contact softness."""
     arm = build_arm_spec()
     for joint, friction in zip(JOINT_NAMES, joint_friction):
         arm.joint(joint).frictionloss = friction
@@ -133,7 +135,7 @@ def attach_cell_arm(spec: mujoco.MjSpec, physics: PhysicsConfig, joint_friction:
         apply_arm_plant(arm, plant, physics.timestep)
     for joint in JOINT_NAMES:  # whichever dry friction the joints have, its rows' stiffness
         arm.joint(joint).solref_friction = [physics.arm_friction_timeconst, 1.0]
-    spec.attach(arm, prefix=names.ARM, frame=spec.worldbody.add_frame(pos=[0, 0, 0]))
+    spec.attach(arm, prefix=names.ARM, frame=spec.worldbody.add_frame(pos=list(base)))
     for pad in PAD_GEOMS:
         spec.geom(names.ARM + pad).solref = list(physics.grip_solref)
 

@@ -24,7 +24,14 @@ import numpy as np
 
 from serpar.errors import ConfigError
 from serpar.sim import names
-from serpar.sim.arm import ACTUATOR_NAMES, FINGER_JOINT_NAMES, JOINT_NAMES, PAD_GEOMS, TCP_SITE
+from serpar.sim.arm import (
+    ACTUATOR_NAMES,
+    BASE_BODY,
+    FINGER_JOINT_NAMES,
+    JOINT_NAMES,
+    PAD_GEOMS,
+    TCP_SITE,
+)
 from serpar.sim.baseplate import BaseplateConfig, build_baseplate_spec
 from serpar.sim.conductor import ConductorConfig, build_conductor_spec
 from serpar.sim.contact import PLATE_CONTACT, add_pad_pairs, add_plate_contact_sensor
@@ -55,6 +62,16 @@ class TrialSceneConfig:
     arm_joint_friction: tuple[float, ...] = ()
     """Dry friction per arm joint [N m], as ``SceneConfig.arm_joint_friction``."""
     entry: tuple[float, float, float] = STATION_ENTRY
+    """The hole's entry in the arm's base frame [m]."""
+    at_origin: bool = False
+    """Put the world origin at the hole's entry (the arm's base at -entry): a float32 engine
+    (MuJoCo Warp) resolves ~2 nm there against ~60 nm at the entry's 0.6 m from the base. The
+    physics is the same; only where the world's origin sits moves."""
+
+    @property
+    def base(self) -> tuple[float, float, float]:
+        """The arm's base in the world [m]."""
+        return tuple(-v for v in self.entry) if self.at_origin else (0.0, 0.0, 0.0)  # type: ignore[return-value]
 
     def __post_init__(self) -> None:
         if len(self.entry) != 3 or not all(np.isfinite(self.entry)):
@@ -83,9 +100,9 @@ def build_trial_spec(cfg: TrialSceneConfig, hole: float, journal: float,
     spec = mujoco.MjSpec()
     spec.modelname = "serpar_trial"
     cfg.physics.apply(spec)
-    attach_cell_arm(spec, cfg.physics, cfg.arm_joint_friction)
+    attach_cell_arm(spec, cfg.physics, cfg.arm_joint_friction, base=cfg.base)
     plate = cfg.plate
-    ex, ey, ez = cfg.entry
+    ex, ey, ez = np.asarray(cfg.entry) + np.asarray(cfg.base)  # the entry in the world
     spec.attach(build_baseplate_spec([hole], plate, cfg.physics), prefix=names.PLATE,
                 frame=spec.worldbody.add_frame(pos=[ex, ey, ez - plate.thickness]))
     spec.body(PLATE_BODY).mocap = True  # the platform's part: moved, never pushed
@@ -117,6 +134,9 @@ class TrialIds:
     """sensordata of the conductor/plate contact force."""
     plate_mocap: int
     """The plate's index in mocap_pos."""
+    base: np.ndarray
+    """The arm's base in the world [m]: a trial's start (the arm's base frame, where its
+    controller works) plus this is where its part goes in the world."""
 
     @classmethod
     def of(cls, model: mujoco.MjModel) -> TrialIds:
@@ -132,5 +152,6 @@ class TrialIds:
                    int(model.jnt_qposadr[part.jntadr[0]]), int(part.id),
                    model.site(names.ARM + TCP_SITE).id, model.site(f"{names.PLATE}hole0").id,
                    model.site(f"{prefix}tip").id, model.site(f"{prefix}shoulder").id,
-                   slice(adr, adr + 3), int(model.body_mocapid[model.body(PLATE_BODY).id]))
+                   slice(adr, adr + 3), int(model.body_mocapid[model.body(PLATE_BODY).id]),
+                   model.body(names.ARM + BASE_BODY).pos.copy())
 

@@ -69,7 +69,8 @@ class TrialDraw:
 
 @dataclass(frozen=True, eq=False)
 class TrialStart:
-    """The state a trial starts in and what its controller aims at (world frame)."""
+    """The state a trial starts in and what its controller aims at, in the arm's base frame
+    (the world's, unless the scene is ``at_origin``)."""
 
     q: Vec
     """Arm joint angles: the TCP at ``start`` with rotation ``rot``."""
@@ -126,7 +127,7 @@ def plan_start(model: mujoco.MjModel, ids: TrialIds, draw: TrialDraw, entry: Vec
     elbow where the controllers' posture task, pulling toward HOME_Q, leaves it) and where the
     part sits."""
     rot, start, seat, axis, part_pos, part_rot = trial_start(draw, entry, journal_length, height)
-    q = solve_site_pose(model, model.qpos0, ids.arm_qpos, ids.tcp_site, start, rotation=rot,
+    q = solve_site_pose(model, model.qpos0, ids.arm_qpos, ids.tcp_site, start + ids.base, rotation=rot,
                         q_start=q_guess, rest=np.asarray(HOME_Q))
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, np.ascontiguousarray(part_rot).ravel())
@@ -137,7 +138,7 @@ def write_start(qpos: Vec, ids: TrialIds, start: TrialStart) -> None:
     """Write the start's joint positions into one state's ``qpos`` (the rest is the model's)."""
     qpos[ids.arm_qpos] = start.q
     qpos[ids.finger_qpos] = start.finger
-    qpos[ids.part_qpos:ids.part_qpos + 3] = start.part_pos
+    qpos[ids.part_qpos:ids.part_qpos + 3] = start.part_pos + ids.base
     qpos[ids.part_qpos + 3:ids.part_qpos + 7] = start.part_quat
 
 
