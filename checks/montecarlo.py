@@ -30,7 +30,7 @@ from serpar.tasks.episode_config import EpisodeConfig, Outcome, wilson_interval
 from serpar.tasks.insertion import InsertionConfig
 from serpar.tasks.insertion_batch import Trial, TrialConfig, TrialResult, run_trials
 from serpar.tasks.ray_runner import ray_map
-from serpar.tasks.trial_start import TrialStart, plan_start
+from serpar.tasks.trial_start import TrialDraw, TrialStart, plan_start
 
 BATCH = 256
 """Simulations at a time (and trials per Ray task): enough that the controller's numpy work per
@@ -117,29 +117,37 @@ def _tip_off_axis(start: TrialStart, scene: TrialSceneConfig) -> float:
     return float(np.hypot(*(tip - np.asarray(scene.entry))[:2]))
 
 
-def prepare(cfg: MonteCarloConfig, seed: int, trials: range, q_guess: np.ndarray
+def prepare(cfg: MonteCarloConfig, seed: int, trials: range, q_guess: np.ndarray,
+            scene: TrialSceneConfig | None = None
             ) -> tuple[list, list[TrialStart], list[TrialSample]]:
     """Models, starts and samples of ``trials`` (one compile and one inverse kinematics each)."""
-    scene = scene_config(cfg)
+    scene = scene or scene_config(cfg)
     models, starts, samples = [], [], []
     for k in trials:
         sample = draw_trial(cfg, seed, k)
-        d = sample.draw
-        model = build_trial_spec(scene, d.hole_diameter, d.journal_diameter, d.body_diameter).compile()
-        start = plan_start(model, TrialIds.of(model), d, np.asarray(scene.entry),
-                           scene.conductor.journal_length, q_guess, cfg.start_height_mm * 1e-3)
+        model, start = _scene_and_start(cfg, sample.draw, scene, q_guess)
         models.append(model)
         starts.append(start)
         samples.append(sample)
     return models, starts, samples
 
 
+def _scene_and_start(cfg: MonteCarloConfig, d: TrialDraw, scene: TrialSceneConfig, q_guess: np.ndarray
+                     ) -> tuple[mujoco.MjModel, TrialStart]:
+    model = build_trial_spec(scene, d.hole_diameter, d.journal_diameter, d.body_diameter).compile()
+    start = plan_start(model, TrialIds.of(model), d, np.asarray(scene.entry),
+                       scene.conductor.journal_length, q_guess, cfg.start_height_mm * 1e-3)
+    return model, start
+
+
 class _Trials(Sequence[Trial]):
     """Trials ``first..stop-1``, each drawn, built and placed when asked for (a slot taking it),
     so that a run holds only its slots' models."""
 
-    def __init__(self, cfg: MonteCarloConfig, seed: int, first: int, stop: int) -> None:
+    def __init__(self, cfg: MonteCarloConfig, seed: int, first: int, stop: int,
+                 scene: TrialSceneConfig | None = None) -> None:
         self.cfg, self.seed, self.first, self.stop = cfg, seed, first, stop
+        self.scene = scene or scene_config(cfg)
         self.samples: dict[int, tuple[TrialSample, TrialStart]] = {}
 
     def __len__(self) -> int:
@@ -149,30 +157,40 @@ class _Trials(Sequence[Trial]):
         if isinstance(i, slice):
             return [self[j] for j in range(*i.indices(len(self)))]
         k = self.first + int(i)
-        trial, sample = _build(self.cfg, self.seed, k)
+        trial, sample = _build(self.cfg, self.seed, k, self.scene)
         self.samples[k] = (sample, trial.start)
         return trial
 
 
-def _build(cfg: MonteCarloConfig, seed: int, k: int) -> tuple[Trial, TrialSample]:
+def _build(cfg: MonteCarloConfig, seed: int, k: int, scene: TrialSceneConfig | None = None
+           ) -> tuple[Trial, TrialSample]:
+    sample = draw_trial(cfg, seed, k)
+    return trial_from(cfg, sample.draw, seed, k, scene), sample
+
+
+def trial_from(cfg: MonteCarloConfig, draw: TrialDraw, seed: int, k: int,
+               scene: TrialSceneConfig | None = None) -> Trial:
+    """The trial of ``draw`` with trial ``k``'s sensor noise (in ``scene``, default the
+    budget's)."""
     # every trial's inverse kinematics from the same guess: the arm has one redundant joint,
     # so the elbow a solution lands on depends on where the search started
-    (model,), (start,), (sample,) = prepare(cfg, seed, range(k, k + 1), np.array(HOME_Q))
-    return Trial(model, start, trial_seeds(seed, [k])[0], sample.draw.hole_diameter), sample
+    model, start = _scene_and_start(cfg, draw, scene or scene_config(cfg), np.array(HOME_Q))
+    return Trial(model, start, trial_seeds(seed, [k])[0], draw.hole_diameter)
 
 
-def build_trial(cfg: MonteCarloConfig, seed: int, k: int) -> Trial:
+def build_trial(cfg: MonteCarloConfig, seed: int, k: int, scene: TrialSceneConfig | None = None) -> Trial:
     """Trial ``k`` of seed ``seed``, exactly as a run builds it."""
-    return _build(cfg, seed, k)[0]
+    return _build(cfg, seed, k, scene)[0]
 
 
 def run_block(cfg: MonteCarloConfig, seed: int, first: int, stop: int, threads: int = 1,
               slots: int = BATCH, on_row: Callable[[TrialRow], None] | None = None,
-              on_period: Callable[[int], None] | None = None) -> list[TrialRow]:
+              on_period: Callable[[int], None] | None = None, scene: TrialSceneConfig | None = None,
+              engine: Callable[[mujoco.MjModel, int], mujoco.batch.Batch] | None = None) -> list[TrialRow]:
     """Trials first..stop-1 in ``slots`` simulations at a time (a local run, or one Ray task);
-    ``on_row`` as each ends."""
-    trials = _Trials(cfg, seed, first, stop)
-    scene = scene_config(cfg)
+    ``on_row`` as each ends; ``scene``/``engine`` for another plant (``--gpu``)."""
+    scene = scene or scene_config(cfg)
+    trials = _Trials(cfg, seed, first, stop, scene)
     rows: list[TrialRow] = []
 
     def done(i: int, r: TrialResult) -> None:
@@ -182,7 +200,7 @@ def run_block(cfg: MonteCarloConfig, seed: int, first: int, stop: int, threads: 
         if on_row is not None:
             on_row(rows[-1])
 
-    run_trials(trials, scene.chamfer, trial_config(cfg), threads, on_period, slots, done)
+    run_trials(trials, scene.chamfer, trial_config(cfg), threads, on_period, slots, done, engine=engine)
     return sorted(rows, key=lambda r: r.trial)
 
 
@@ -193,11 +211,16 @@ def _ray_block(_: None, cfg: MonteCarloConfig, seed: int, first: int, stop: int)
 def run_montecarlo(cfg: MonteCarloConfig, trials: int, seed: int, threads: int = 2,
                    batch: int = BATCH, on_rows: Callable[[list[TrialRow]], None] | None = None,
                    on_period: Callable[[int], None] | None = None,
-                   ray_address: str | None = None) -> MonteCarloResult:
+                   ray_address: str | None = None, scene: TrialSceneConfig | None = None,
+                   engine: Callable[[mujoco.MjModel, int], mujoco.batch.Batch] | None = None
+                   ) -> MonteCarloResult:
     """``trials`` trials here, ``batch`` simulations at a time on ``threads`` threads, a trial
     starting as another ends; or as one Ray task per ``batch`` trials (``ray_address``).
     ``on_rows`` gets the rows as they finish. Ctrl-C keeps the trials that finished; a dead Ray
-    task's trials are missing from the result, and the reason is in ``errors``."""
+    task's trials are missing from the result, and the reason is in ``errors``. ``scene`` and
+    ``engine``: another plant for a local run (``--gpu``: MuJoCo Warp, the scene at the origin)."""
+    if engine is not None and ray_address is not None:
+        raise ConfigError("--gpu runs on this machine's GPU; --ray spreads CPU batches: choose one")
     if trials < 1 or threads < 1 or batch < 1:
         raise ConfigError(f"trials {trials}, threads {threads}, batch {batch}: each must be >= 1")
     t0 = time.perf_counter()
@@ -210,7 +233,8 @@ def run_montecarlo(cfg: MonteCarloConfig, trials: int, seed: int, threads: int =
 
     try:
         if ray_address is None:
-            run_block(cfg, seed, 0, trials, threads, batch, lambda row: keep([row]), on_period)
+            run_block(cfg, seed, 0, trials, threads, batch, lambda row: keep([row]), on_period,
+                      scene, engine)
         else:
             blocks = [(first, min(first + batch, trials)) for first in range(0, trials, batch)]
             for rows in _ray_rows(cfg, seed, blocks, ray_address, result):

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from serpar.checks.montecarlo import BATCH, MonteCarloResult, run_montecarlo, write_parquet
 from serpar.checks.montecarlo_config import MonteCarloConfig
+from serpar.checks.montecarlo_gpu import CHECK_SAMPLE, check_sample, run_gpu
 from serpar.checks.montecarlo_record import FOLDER, failed_rows, record_failed
 from serpar.checks.montecarlo_report import sensitivity_rows, write_montecarlo_report
 from serpar.checks.montecarlo_validation import validate
@@ -20,6 +21,7 @@ from serpar.cli.output import print_json, progress, table
 from serpar.errors import ConfigError
 from serpar.sim.config_io import load_yaml_config
 from serpar.sim.strict_json import dumps
+from serpar.tasks.warp_batch import check_device
 
 OUT_FILES = ("trials.parquet", "summary.json")
 """What --out DIR holds (and FOLDER/trial_<k>.rrd, the failed trials recorded)."""
@@ -53,6 +55,13 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--ray", metavar="ADDRESS",
                    help="one Ray task per batch on a cluster: local, auto or ray://HOST:PORT "
                         "(cluster extra); results equal a local run's")
+    p.add_argument("--gpu", action="store_true",
+                   help="run the trials on MuJoCo Warp on this machine's CUDA GPU (float32, the scene "
+                        "at the origin; the gpu extra: pip install 'serpar[gpu]'), then re-run a random "
+                        "sample in float64 on the CPU cores and report the agreement")
+    p.add_argument("--gpu-check", type=int, metavar="K", default=CHECK_SAMPLE,
+                   help=f"with --gpu: trials re-run in float64 on the CPU, each also with its lateral "
+                        f"offset moved -/+2 um to find boundary trials (default {CHECK_SAMPLE})")
     p.add_argument("--validate", type=int, metavar="HOLES",
                    help="instead: run a HOLES-hole episode (seed --seed) and replay each of its "
                         "insertions as a trial from the state it started in; prints outcomes and "
@@ -89,6 +98,10 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
         raise ConfigError(f"--trials {args.trials}, --threads {args.threads}, --batch {args.batch}: "
                           "each must be >= 1")
     check_ray(args.ray, 1)
+    if args.gpu:
+        if args.gpu_check < 1:
+            raise ConfigError(f"--gpu-check {args.gpu_check}: a sample of at least 1 trial")
+        check_device("cuda")  # before any work: the extra and a CUDA device
     if args.validate is not None:
         return _validate(args)
     cfg = load_yaml_config(MonteCarloConfig, args.config) if args.config else MonteCarloConfig()
@@ -108,8 +121,13 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
         seated[1] += len(rows)
         bar.set_postfix_str(f"{seated[0]}/{seated[1]} seated")
 
-    result = run_montecarlo(cfg, args.trials, args.seed, args.threads, args.batch, on_rows,
-                            ray_address=args.ray)
+    if args.gpu:
+        if args.ray:
+            raise ConfigError("--gpu runs on this machine's GPU; --ray spreads CPU batches: choose one")
+        result = run_gpu(cfg, args.trials, args.seed, args.batch, "cuda", on_rows)
+    else:
+        result = run_montecarlo(cfg, args.trials, args.seed, args.threads, args.batch, on_rows,
+                                ray_address=args.ray)
     for error in result.errors:
         sys.stderr.write(f"serpar montecarlo: {error}\n")
     bar.close()
@@ -118,7 +136,10 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
                          "finished and are reported\n")
     if not result.rows:
         raise ConfigError("no trial finished")
-    info = summary(result) | {"recorded": []}
+    info = summary(result) | {"recorded": [], "engine": "mujoco_warp float32 (cuda)" if args.gpu
+                              else "mujoco.batch float64 (cpu)"}
+    if args.gpu and result.rows:
+        info["gpu_check"] = check_sample(result, args.gpu_check, args.threads)
     if out is not None:
         out.clear()
         out.path.mkdir(parents=True, exist_ok=True)
@@ -143,6 +164,11 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
             f"P(|dP| < {d} mm) = {within[d]:.4f} (paper, its robot: {paper[d]})" for d in within)  # type: ignore[index]
             + f"; P(seated) = {s001['p_seated']:.4f}")
     _say_recorded(info.get("recorded", []), len(failed_rows(result)))
+    if "gpu_check" in info:
+        g = info["gpu_check"]
+        print(f"float64 CPU re-run of {g['sampled']} GPU trials: same outcome {g['agree']}/{g['compared']}"
+              f" (boundary trials apart: {g['boundary_agree']}/{g['boundary']}); GPU/CPU peak force "
+              f"median ratio {g['peak_ratio_median']}")
     print(table(["error source", "AUC (failed vs seated)", "mean seated", "mean failed"],
                 [[s, "-" if a is None else f"{a:.3f}", f"{ok:.4g}", f"{bad:.4g}"]
                  for s, a, ok, bad in sensitivity_rows(result)]))

@@ -88,17 +88,20 @@ class Trial:
 def run_trials(trials: Sequence[Trial], chamfer: float, cfg: TrialConfig = TrialConfig(),
                nthread: int = 1, on_period: Callable[[int], None] | None = None,
                slots: int | None = None, on_result: Callable[[int, TrialResult], None] | None = None,
-               probe: Callable[[mujoco.batch.Batch, TrialSlots], None] | None = None
+               probe: Callable[[mujoco.batch.Batch, TrialSlots], None] | None = None,
+               engine: Callable[[mujoco.MjModel, int], mujoco.batch.Batch] | None = None
                ) -> list[TrialResult]:
     """Run ``trials`` to their ends in ``slots`` simulations at a time (default: all at once),
     each started as a slot frees (their models must share one spec's sizes; the bore's entry
     ``chamfer`` [m]); ``on_period(active)`` after every control period, ``on_result(i, r)`` as
     trial i ends. Each trial is read from ``trials`` once, when its slot takes it (a lazy
     sequence builds its scene then). ``probe(batch, slots)`` sees the plant and the trials'
-    states after every period, before ended trials leave their slots (a recorder's hook)."""
+    states after every period, before ended trials leave their slots (a recorder's hook).
+    ``engine(model, slots)`` makes the plant's batch (default: ``mujoco.batch.Batch`` on
+    ``nthread`` threads; tasks/warp_batch.py's ``WarpBatch`` for MuJoCo Warp)."""
     if not trials:
         raise ConfigError("run_trials needs at least one trial")
-    runner = _Runner(trials, chamfer, cfg, nthread, min(len(trials), slots or len(trials)))
+    runner = _Runner(trials, chamfer, cfg, nthread, min(len(trials), slots or len(trials)), engine)
     return runner.run(on_period, on_result, probe)
 
 
@@ -110,13 +113,15 @@ class _Runner:
     nthread: int
     n: int
     """Slots (simulations in the batch)."""
+    engine: Callable[[mujoco.MjModel, int], mujoco.batch.Batch] | None = None
     results: list[TrialResult | None] = field(init=False)
 
     def __post_init__(self) -> None:
         self._first = self.trials[0]
         first = self._first.model
         self.ids, self.arm = TrialIds.of(first), ArmIndex.from_model(first, names.ARM)
-        self.batch = mujoco.batch.Batch(first, self.n, self.nthread)
+        self.batch = (self.engine(first, self.n) if self.engine is not None
+                      else mujoco.batch.Batch(first, self.n, self.nthread))
         self.models = [first] * self.n  # each slot's trial model, set as it loads
         self.ctl = BatchArmController(self.n, first.opt.timestep, self.cfg.controller,
                                       seeds=[self._first.seed] * self.n, nthread=self.nthread)

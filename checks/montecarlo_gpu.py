@@ -1,0 +1,101 @@
+"""``serpar montecarlo --gpu``: the trials on MuJoCo Warp (float32, tasks/warp_batch.py), then
+a random sample of them re-run in float64 on the CPU cores, the reference engine.
+
+A sampled trial agrees when its float64 outcome is the GPU's. Some trials lie on an outcome
+boundary, where float32 rounding alone may tip them: a sampled trial whose float64 outcome
+changes when its lateral offset moves by ``BOUNDARY_SHIFT_M`` either way (the hole moved along
+its error, so the tip meets the plate that much further along the same line) is a
+boundary trial, and its agreement is reported apart.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+
+from serpar.checks.montecarlo import (
+    MonteCarloResult,
+    TrialRow,
+    run_montecarlo,
+    scene_config,
+    trial_config,
+    trial_from,
+)
+from serpar.checks.montecarlo_config import MonteCarloConfig
+from serpar.errors import ConfigError
+from serpar.sim.trial_scene import TrialSceneConfig
+from serpar.tasks.insertion_batch import run_trials
+from serpar.tasks.trial_start import TrialDraw
+from serpar.tasks.warp_batch import WarpBatch, check_device
+
+BOUNDARY_SHIFT_M = 2e-6
+CHECK_SAMPLE = 64
+"""Trials of a GPU run re-run in float64 on the CPU by default."""
+
+
+def gpu_scene(cfg: MonteCarloConfig) -> TrialSceneConfig:
+    """The budget's trial scene with the world's origin at the hole (float32 resolves ~2 nm
+    there)."""
+    return dataclasses.replace(scene_config(cfg), at_origin=True)
+
+
+def run_gpu(cfg: MonteCarloConfig, trials: int, seed: int, batch: int, device: str = "cuda",
+            on_rows: Callable[[list[TrialRow]], None] | None = None) -> MonteCarloResult:
+    """All ``trials`` on MuJoCo Warp, ``batch`` worlds at a time on ``device``."""
+    check_device(device)
+    return run_montecarlo(cfg, trials, seed, 1, batch, on_rows, scene=gpu_scene(cfg),
+                          engine=lambda model, n: WarpBatch(model, n, device))
+
+
+def shifted(row: TrialRow, delta: float) -> TrialDraw:
+    """The row's draw with the believed hole moved ``delta`` [m] along its error (along x for
+    none): the journal tip meets the plate ``delta`` further along the same line."""
+    draw = row.sample.draw
+    err = np.asarray(draw.hole_error, float)
+    norm = float(np.hypot(*err))
+    direction = err / norm if norm > 0 else np.array([1.0, 0.0])
+    return dataclasses.replace(draw, hole_error=(float(err[0] - delta * direction[0]),
+                                                 float(err[1] - delta * direction[1])))
+
+
+def check_sample(result: MonteCarloResult, sample_size: int = CHECK_SAMPLE, threads: int = 2,
+                 rng_seed: int = 0) -> dict[str, object]:
+    """Re-run a random sample of ``result``'s trials in float64 on the CPU, with each one's
+    lateral offset also moved -/+ BOUNDARY_SHIFT_M; the agreement, boundary trials apart."""
+    if sample_size < 1:
+        raise ConfigError(f"--gpu-check {sample_size}: a sample of at least 1 trial")
+    cfg, seed = result.config, result.seed
+    rng = np.random.default_rng([seed, rng_seed, 31])
+    rows = sorted(rng.choice(len(result.rows), size=min(sample_size, len(result.rows)), replace=False))
+    picked = [result.rows[i] for i in rows]
+    scene = scene_config(cfg)
+    trials = []
+    for row in picked:
+        for delta in (0.0, -BOUNDARY_SHIFT_M, BOUNDARY_SHIFT_M):
+            draw = row.sample.draw if delta == 0.0 else shifted(row, delta)
+            trials.append(trial_from(cfg, draw, seed, row.trial, scene))
+    cpu = run_trials(trials, scene.chamfer, trial_config(cfg), threads)
+    per_trial = []
+    for j, row in enumerate(picked):
+        ref, minus, plus = (cpu[3 * j + i].outcome.value for i in range(3))
+        per_trial.append({"trial": row.trial, "gpu": row.result.outcome.value, "cpu": ref,
+                          "boundary": minus != ref or plus != ref,
+                          "gpu_peak_n": row.result.peak_force_n, "cpu_peak_n": cpu[3 * j].peak_force_n})
+    return agreement(per_trial)
+
+
+def agreement(per_trial: list[dict[str, object]]) -> dict[str, object]:
+    """Counts over the sampled trials (each: gpu and cpu outcome, whether a boundary trial)."""
+    inner = [t for t in per_trial if not t["boundary"]]
+    edge = [t for t in per_trial if t["boundary"]]
+    same = sum(t["gpu"] == t["cpu"] for t in inner)
+    return {"sampled": len(per_trial), "boundary": len(edge),
+            "agree": same, "compared": len(inner),
+            "agreement": same / len(inner) if inner else None,
+            "boundary_agree": sum(t["gpu"] == t["cpu"] for t in edge),
+            "peak_ratio_median": (float(np.median([t["gpu_peak_n"] / t["cpu_peak_n"] for t in per_trial  # type: ignore[operator]
+                                                   if t["cpu_peak_n"]]))
+                                  if any(t["cpu_peak_n"] for t in per_trial) else None),
+            "trials": per_trial}

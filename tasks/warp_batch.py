@@ -1,0 +1,179 @@
+"""The insertion trials on MuJoCo Warp (``serpar montecarlo --gpu``): the part of
+``mujoco.batch.Batch`` that tasks/insertion_batch.py uses, over ``mujoco_warp`` worlds.
+
+The runner, the controller and the trial logic stay the CPU path's, one code; this engine
+only steps the plant. Per control period the host uploads the substeps' commands, the
+device runs the period's substeps (captured once as a CUDA graph: a kernel sets each
+substep's command, one records each substep's sensors) and the host reads the state back.
+The controller therefore runs on the host once per period, not inside the graph: one
+implementation of the control law, at the price of a round trip every period (not every
+step).
+
+Per-trial dimensions without a model per world: each trial's compiled model gives its
+world the fields that differ between trials (journal and body radii, the bore facets'
+positions, which move radially with the hole's diameter, the part's mass and inertia and
+what the compiler derives from them); meshes are shared, so every world uses the first
+trial's bore-facet and journal-tip meshes (their vertices move < 1 um between draws).
+
+MuJoCo Warp is float32: use a scene ``at_origin`` (sim/trial_scene.py). Measured on the
+CPU device (warp's LLVM backend, no GPU): a trial of the default budget seats in both
+engines, insertion time 0.914 s vs 0.913 s, but a seated journal's contacts chatter in
+float32 (plate force 0 / 10 N on alternate periods) and its peak force read 17.6 N against
+5.32 N.
+"""
+
+from __future__ import annotations
+
+import ctypes.util
+import logging
+from collections.abc import Sequence
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from serpar.errors import ConfigError
+
+WRITABLE = ("qpos", "qvel", "ctrl", "mocap_pos")
+"""Fields the runner writes between calls: uploaded before every device call."""
+PER_WORLD = ("geom_size", "geom_pos", "geom_quat", "geom_rbound", "geom_aabb", "body_mass",
+             "body_inertia", "body_ipos", "body_invweight0", "dof_invweight0")
+"""Model fields that differ between trials' models and MuJoCo Warp takes per world."""
+INSTALL = "pip install 'serpar[gpu]' (mujoco-warp, warp-lang)"
+
+
+def load_warp() -> tuple[object, object]:
+    """(warp, mujoco_warp), or ConfigError saying how to install them."""
+    try:
+        import warp
+        warp.config.log_level = logging.WARNING  # its start-up banner would go to stdout, ahead of --json
+        import mujoco_warp
+    except ImportError as exc:
+        raise ConfigError(f"--gpu needs MuJoCo Warp ({exc.name} is not installed): {INSTALL}") from None
+    return warp, mujoco_warp
+
+
+def check_device(device: str) -> str:
+    """``cuda`` (the default GPU) or ``cpu`` (warp's CPU backend, for tests): ConfigError when
+    the device does not exist here."""
+    if device not in ("cuda", "cpu"):
+        raise ConfigError(f"device {device!r}; valid: cuda, cpu")
+    no_gpu = ConfigError("--gpu: no CUDA device on this machine; run without --gpu for the CPU cores")
+    if device == "cuda" and ctypes.util.find_library("cuda") is None:
+        raise no_gpu  # no driver: said before warp starts (and warns of it on stderr)
+    wp, _ = load_warp()
+    if device == "cuda" and wp.get_cuda_device_count() == 0:  # type: ignore[attr-defined]
+        raise no_gpu
+    return device
+
+
+class WarpBatch:
+    """``n`` worlds of ``model`` on ``device``; the calls and arrays of ``mujoco.batch.Batch``
+    that run_trials uses (bind, set_models, reset, forward, rollout, status, warning, error)."""
+
+    def __init__(self, model: mujoco.MjModel, n: int, device: str = "cuda",
+                 contacts_per_world: int = 64, constraints_per_world: int = 512) -> None:
+        self.wp, self.mjw = load_warp()
+        wp, mjw = self.wp, self.mjw
+        self.model, self.n, self.device = model, n, check_device(device)
+        with wp.ScopedDevice(device):  # type: ignore[attr-defined]
+            self.m = mjw.put_model(model, batch_sizes=dict.fromkeys(PER_WORLD, n))  # type: ignore[attr-defined]
+            self.d = mjw.make_data(model, nworld=n, nconmax=contacts_per_world * n,  # type: ignore[attr-defined]
+                                   njmax=constraints_per_world)
+        self._host: dict[str, NDArray[np.float64]] = {}
+        self.status = np.zeros(n, dtype=np.int32)
+        self.warning = np.zeros((n, int(mujoco.mjtWarning.mjNWARNING), 2), dtype=np.int32)
+        self._graphs: dict[int, object] = {}
+        self._ctrl_buf = self._rec_buf = None
+        self._models: list[mujoco.MjModel] = [model] * n
+
+    # -- arrays --------------------------------------------------------------------------
+    def bind(self, name: str) -> NDArray[np.float64]:
+        """The (n, ...) host copy of a data field, refreshed after every device call."""
+        if name not in self._host:
+            self._host[name] = np.asarray(getattr(self.d, name).numpy(), dtype=float).copy()
+        return self._host[name]
+
+    def _upload(self) -> None:
+        for name in WRITABLE:
+            if name in self._host:
+                getattr(self.d, name).assign(self._host[name].astype(np.float32))
+
+    def _download(self) -> None:
+        for name, host in self._host.items():
+            host[...] = getattr(self.d, name).numpy()
+
+    def set_models(self, models: Sequence[mujoco.MjModel]) -> None:
+        """Each world takes its trial model's per-world fields (PER_WORLD); meshes stay the
+        first model's."""
+        changed = [i for i, (a, b) in enumerate(zip(self._models, models)) if a is not b]
+        if not changed:
+            return
+        self._models = list(models)
+        for name in PER_WORLD:
+            field = getattr(self.m, name)
+            values = field.numpy()
+            for i in changed:
+                values[i] = np.asarray(getattr(models[i], name)).reshape(values[i].shape)
+            field.assign(values)
+
+    # -- calls ---------------------------------------------------------------------------
+    def reset(self, ids: NDArray[np.intp], stage: object = None) -> None:
+        mask = np.zeros(self.n, dtype=bool)
+        mask[np.asarray(ids)] = True
+        self._upload()
+        self.mjw.reset_data(self.m, self.d, reset=self.wp.array(mask, dtype=bool, device=self.device))  # type: ignore[attr-defined]
+        self._download()
+
+    def forward(self, ids: NDArray[np.intp] | None = None) -> None:
+        self._upload()
+        self.mjw.forward(self.m, self.d)  # type: ignore[attr-defined]
+        self._download()
+
+    def rollout(self, nstep: int, control: NDArray[np.float64], record: Sequence[str] = (),
+                ids: NDArray[np.intp] | None = None) -> dict[str, NDArray[np.float64]]:
+        """``nstep`` steps of every world, the worlds ``ids`` under ``control`` (len(ids) x nstep
+        x nu), the others holding their command; the recorded fields of ``ids`` per step."""
+        wp = self.wp
+        ids = np.arange(self.n) if ids is None else np.asarray(ids)
+        if tuple(record) not in ((), ("sensordata",)):
+            raise ConfigError(f"WarpBatch records sensordata only, not {record}")
+        ctrl = self.bind("ctrl")
+        full = np.repeat(ctrl[None], nstep, axis=0)  # step x world x nu
+        full[:, ids] = np.swapaxes(control, 0, 1)
+        self._buffers(nstep)
+        self._ctrl_buf.assign(full.astype(np.float32))  # type: ignore[union-attr]
+        self._upload()
+        if self.device == "cuda":
+            if nstep not in self._graphs:
+                with wp.ScopedCapture(device=self.device) as capture:  # type: ignore[attr-defined]
+                    self._steps(nstep)
+                self._graphs[nstep] = capture.graph
+            wp.capture_launch(self._graphs[nstep])  # type: ignore[attr-defined]
+        else:
+            with wp.ScopedDevice(self.device):  # type: ignore[attr-defined]
+                self._steps(nstep)
+        self._download()
+        ctrl[...] = full[-1]
+        if not record:
+            return {}
+        rec = self._rec_buf.numpy()[:nstep]  # type: ignore[union-attr]
+        return {"sensordata": np.swapaxes(rec, 0, 1)[ids].astype(float)}
+
+    def _buffers(self, nstep: int) -> None:
+        wp = self.wp
+        shape = (nstep, self.n)
+        if self._ctrl_buf is None or self._ctrl_buf.shape[0] < nstep:
+            self._ctrl_buf = wp.zeros((*shape, self.model.nu), dtype=float, device=self.device)  # type: ignore[attr-defined]
+            self._rec_buf = wp.zeros((*shape, self.model.nsensordata), dtype=float, device=self.device)  # type: ignore[attr-defined]
+            self._graphs.clear()
+
+    def _steps(self, nstep: int) -> None:
+        wp, mjw = self.wp, self.mjw
+        for s in range(nstep):
+            wp.copy(self.d.ctrl, self._ctrl_buf[s])  # type: ignore[attr-defined,index]
+            mjw.step(self.m, self.d)  # type: ignore[attr-defined]
+            wp.copy(self._rec_buf[s], self.d.sensordata)  # type: ignore[attr-defined,index]
+
+    def error(self, i: int) -> str:
+        return ""

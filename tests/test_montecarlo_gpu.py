@@ -1,0 +1,74 @@
+"""``serpar montecarlo --gpu``'s check: a random sample of the GPU's trials re-run in float64 on
+the CPU, boundary trials (whose float64 outcome flips when the lateral offset moves 2 um) apart.
+The engine itself (tasks/warp_batch.py) runs here on warp's CPU device where the gpu extra is
+installed."""
+
+from __future__ import annotations
+
+import ctypes.util
+import dataclasses
+import importlib.util
+
+import numpy as np
+import pytest
+
+from serpar.checks.montecarlo import (
+    TrialRow,
+    _tip_off_axis,
+    run_montecarlo,
+    scene_config,
+    trial_from,
+)
+from serpar.checks.montecarlo_config import MonteCarloConfig, draw_trial
+from serpar.checks.montecarlo_gpu import BOUNDARY_SHIFT_M, agreement, check_sample, run_gpu, shifted
+from serpar.cli.entry import main
+
+CFG = MonteCarloConfig()
+HAS_WARP = importlib.util.find_spec("mujoco_warp") is not None
+
+
+def _trial(gpu: str, cpu: str, boundary: bool) -> dict[str, object]:
+    return {"trial": 0, "gpu": gpu, "cpu": cpu, "boundary": boundary, "gpu_peak_n": 5.5, "cpu_peak_n": 5.0}
+
+
+def test_boundary_trials_are_counted_apart() -> None:
+    sample = [_trial("success", "success", False), _trial("jam", "success", False),
+              _trial("jam", "success", True), _trial("success", "success", True)]
+    a = agreement(sample)
+    assert (a["sampled"], a["compared"], a["agree"], a["agreement"]) == (4, 2, 1, 0.5)
+    assert (a["boundary"], a["boundary_agree"]) == (2, 1)
+    assert a["peak_ratio_median"] == pytest.approx(1.1)
+
+
+def test_the_shift_moves_the_tips_start_by_two_micrometres() -> None:
+    scene = scene_config(CFG)
+    sample = draw_trial(CFG, 0, 3)
+    row = TrialRow(3, sample, 0.0, None)  # type: ignore[arg-type]
+    base = _tip_off_axis(trial_from(CFG, sample.draw, 0, 3).start, scene)
+    for delta in (-BOUNDARY_SHIFT_M, BOUNDARY_SHIFT_M):
+        moved = _tip_off_axis(trial_from(CFG, shifted(row, delta), 0, 3).start, scene)
+        assert abs(abs(moved - base) - BOUNDARY_SHIFT_M) < 0.3e-6
+
+
+@pytest.mark.skipif(ctypes.util.find_library("cuda") is not None, reason="a CUDA driver is here")
+def test_without_a_gpu_the_flag_is_one_line(capsys) -> None:
+    assert main(["montecarlo", "--gpu", "--trials", "2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no CUDA device" in err[0]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not HAS_WARP, reason="the gpu extra (mujoco-warp) is not installed")
+def test_warp_trials_agree_with_float64_on_a_small_batch() -> None:
+    """Two trials on MuJoCo Warp's kernels (warp's CPU device), cut at 0.3 s after the settle:
+    both still approaching in either engine; the check re-runs them in float64, finds no
+    boundary trial and full agreement."""
+    cfg = dataclasses.replace(CFG, time_limit_s=0.3)
+    result = run_gpu(cfg, 2, seed=0, batch=2, device="cpu")
+    assert [r.result.outcome.value for r in result.rows] == ["timeout", "timeout"]
+    check = check_sample(result, sample_size=2, threads=2)
+    assert (check["sampled"], check["boundary"], check["agree"], check["compared"]) == (2, 0, 2, 2)
+    cpu = run_montecarlo(cfg, 2, seed=0, threads=2)  # the cell-frame scene, float64
+    gpu_height = np.array([r.result.depth_shortfall_mm for r in result.rows])
+    cpu_height = np.array([r.result.depth_shortfall_mm for r in cpu.rows])
+    assert np.all(np.abs(gpu_height - cpu_height) < 0.01)  # float32 within 10 um of float64
