@@ -69,6 +69,8 @@ class MonteCarloResult:
     interrupted: bool = False
     errors: list[str] = field(default_factory=list)
     """Batches that did not come back (a Ray task that died), with why."""
+    notes: list[str] = field(default_factory=list)
+    """What the engine says of the run (MuJoCo Warp's solver at its iteration limit)."""
 
     @property
     def counts(self) -> dict[str, int]:

@@ -56,9 +56,10 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="one Ray task per batch on a cluster: local, auto or ray://HOST:PORT "
                         "(cluster extra); results equal a local run's")
     p.add_argument("--gpu", action="store_true",
-                   help="run the trials on MuJoCo Warp on this machine's CUDA GPU (float32, the scene "
-                        "at the origin; the gpu extra: pip install 'serpar[gpu]'), then re-run a random "
-                        "sample in float64 on the CPU cores and report the agreement")
+                   help="experimental, not yet agreeing with the CPU (docs/montecarlo.md): run the "
+                        "trials on MuJoCo Warp on this machine's CUDA GPU (float32, the scene at the "
+                        "origin; the gpu extra: pip install 'serpar[gpu]'), then re-run a random sample "
+                        "in float64 on the CPU cores and report the agreement")
     p.add_argument("--gpu-check", type=int, metavar="K", default=CHECK_SAMPLE,
                    help=f"with --gpu: trials re-run in float64 on the CPU, each also with its lateral "
                         f"offset moved -/+2 um to find boundary trials (default {CHECK_SAMPLE})")
@@ -86,6 +87,7 @@ def summary(result: MonteCarloResult) -> dict[str, object]:
             "interrupted": result.interrupted, "seed": result.seed,
             "success_rate": result.success_rate, "ci_low": lo, "ci_high": hi,
             "outcomes": result.counts, "wall_s": result.wall_s, "errors": result.errors,
+            "notes": result.notes,
             "peak_force_n": {"mean": sum(peaks) / len(peaks) if peaks else None,
                              "max": max(peaks) if peaks else None},
             "sensitivity": {s: {"auc": a, "mean_seated": ok, "mean_failed": bad}
@@ -130,6 +132,8 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
                                 ray_address=args.ray)
     for error in result.errors:
         sys.stderr.write(f"serpar montecarlo: {error}\n")
+    for note in result.notes:
+        sys.stderr.write(f"serpar montecarlo: note: {note}\n")
     bar.close()
     if result.interrupted:
         sys.stderr.write(f"serpar montecarlo: interrupted; {len(result.rows)} of {args.trials} trials "

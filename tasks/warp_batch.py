@@ -10,16 +10,15 @@ implementation of the control law, at the price of a round trip every period (no
 step).
 
 Per-trial dimensions without a model per world: each trial's compiled model gives its
-world the fields that differ between trials (journal and body radii, the bore facets'
-positions, which move radially with the hole's diameter, the part's mass and inertia and
-what the compiler derives from them); meshes are shared, so every world uses the first
-trial's bore-facet and journal-tip meshes (their vertices move < 1 um between draws).
+world the fields that differ between trials (journal and body radii, the part's mass and
+inertia and what the compiler derives from them). Meshes are shared (the engine's model's):
+the bore facets are moved radially so that each world's inner faces sit at its hole's
+radius (within 0.1 um), and the journal tip is the thinnest journal's.
 
-MuJoCo Warp is float32: use a scene ``at_origin`` (sim/trial_scene.py). Measured on the
-CPU device (warp's LLVM backend, no GPU): a trial of the default budget seats in both
-engines, insertion time 0.914 s vs 0.913 s, but a seated journal's contacts chatter in
-float32 (plate force 0 / 10 N on alternate periods) and its peak force read 17.6 N against
-5.32 N.
+MuJoCo Warp is float32: use a scene ``at_origin`` (sim/trial_scene.py). Experimental: on
+warp's CPU device a trial alone seats as in float64 (peak force 17.6 N against 5.32 N: a
+seated journal's contacts chatter), but trials of different draws in one batch blow up in
+contact (docs/montecarlo.md, "On a GPU").
 """
 
 from __future__ import annotations
@@ -37,7 +36,8 @@ from serpar.errors import ConfigError
 WRITABLE = ("qpos", "qvel", "ctrl", "mocap_pos")
 """Fields the runner writes between calls: uploaded before every device call."""
 PER_WORLD = ("geom_size", "geom_pos", "geom_quat", "geom_rbound", "geom_aabb", "body_mass",
-             "body_inertia", "body_ipos", "body_invweight0", "dof_invweight0")
+             "body_subtreemass", "body_inertia", "body_ipos", "body_iquat", "body_invweight0",
+             "dof_invweight0")
 """Model fields that differ between trials' models and MuJoCo Warp takes per world."""
 INSTALL = "pip install 'serpar[gpu]' (mujoco-warp, warp-lang)"
 
@@ -80,6 +80,13 @@ class WarpBatch:
             self.m = mjw.put_model(model, batch_sizes=dict.fromkeys(PER_WORLD, n))  # type: ignore[attr-defined]
             self.d = mjw.make_data(model, nworld=n, nconmax=contacts_per_world * n,  # type: ignore[attr-defined]
                                    njmax=constraints_per_world)
+        # the float32 solver often stops at its iteration limit short of the tolerance:
+        # counted here (iteration_limit) instead of printed to stdout on every step
+        quiet = int(mjw.OverflowType.ITERATIONS) | int(mjw.OverflowType.LS_ITERATIONS)  # type: ignore[attr-defined]
+        self.m.opt.warn_overflow = int(self.m.opt.warn_overflow) & ~quiet
+        self.iteration_limit = 0
+        """World-periods whose last step stopped at the solver's iteration limit."""
+        self.world_periods = 0
         self._host: dict[str, NDArray[np.float64]] = {}
         self.status = np.zeros(n, dtype=np.int32)
         self.warning = np.zeros((n, int(mujoco.mjtWarning.mjNWARNING), 2), dtype=np.int32)
@@ -110,11 +117,14 @@ class WarpBatch:
         if not changed:
             return
         self._models = list(models)
+        poses = {i: _mesh_geom_poses(self.model, models[i]) for i in changed}
         for name in PER_WORLD:
             field = getattr(self.m, name)
             values = field.numpy()
             for i in changed:
-                values[i] = np.asarray(getattr(models[i], name)).reshape(values[i].shape)
+                own = poses[i].get(name) if name in ("geom_pos", "geom_quat") else None
+                values[i] = (own if own is not None else
+                             np.asarray(getattr(models[i], name)).reshape(values[i].shape))
             field.assign(values)
 
     # -- calls ---------------------------------------------------------------------------
@@ -154,6 +164,8 @@ class WarpBatch:
             with wp.ScopedDevice(self.device):  # type: ignore[attr-defined]
                 self._steps(nstep)
         self._download()
+        self.iteration_limit += int((self.d.solver_niter.numpy() >= self.model.opt.iterations).sum())
+        self.world_periods += self.n
         ctrl[...] = full[-1]
         if not record:
             return {}
@@ -177,3 +189,32 @@ class WarpBatch:
 
     def error(self, i: int) -> str:
         return ""
+
+
+def _mesh_vertices(model: mujoco.MjModel, g: int) -> NDArray[np.float64]:
+    """Geom ``g``'s mesh vertices in its body's frame."""
+    k = model.geom_dataid[g]
+    v = model.mesh_vert[model.mesh_vertadr[k]:model.mesh_vertadr[k] + model.mesh_vertnum[k]]
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, model.geom_quat[g])
+    return v @ rot.reshape(3, 3).T + model.geom_pos[g]
+
+
+def _mesh_geom_poses(shared: mujoco.MjModel, own: mujoco.MjModel) -> dict[str, NDArray[np.float64]]:
+    """geom_pos and geom_quat for the shared meshes in ``own``'s world.
+
+    A bore facet's mesh is the wall between the hole and the plate's window, so its centroid
+    moves by half the hole's radius change while its inner face moves by all of it: the shared
+    facet is moved radially by the change of the inner face's radius (own's against shared's,
+    measured on the meshes), which puts the inner face where own's is. The journal tip keeps the
+    shared pose: its mesh is the thinnest journal's (checks/montecarlo_gpu.py ``reference_model``), so it is never
+    proud of a world's journal cylinder."""
+    pos, quat = shared.geom_pos.copy(), shared.geom_quat.copy()
+    for g in np.flatnonzero(shared.geom_type == mujoco.mjtGeom.mjGEOM_MESH):
+        centre = shared.geom_pos[g, :2]
+        radius = float(np.hypot(*centre))
+        if radius < 1e-9:  # on its body's axis: the journal tip
+            continue
+        inner = [float(np.min(np.hypot(*_mesh_vertices(m, g)[:, :2].T))) for m in (own, shared)]
+        pos[g, :2] = centre + (inner[0] - inner[1]) * centre / radius
+    return {"geom_pos": pos, "geom_quat": quat}
