@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import ctypes.util
 import dataclasses
-import importlib.util
 
 import numpy as np
 import pytest
@@ -24,7 +23,11 @@ from serpar.checks.montecarlo_gpu import BOUNDARY_SHIFT_M, agreement, check_samp
 from serpar.cli.entry import main
 
 CFG = MonteCarloConfig()
-HAS_WARP = importlib.util.find_spec("mujoco_warp") is not None
+try:
+    import mujoco_warp  # noqa: F401
+    HAS_WARP = True
+except ImportError:
+    HAS_WARP = False
 
 
 def _trial(gpu: str, cpu: str, boundary: bool) -> dict[str, object]:
