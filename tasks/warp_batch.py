@@ -93,6 +93,7 @@ class WarpBatch:
         self._graphs: dict[int, object] = {}
         self._ctrl_buf = self._rec_buf = None
         self._models: list[mujoco.MjModel] = [model] * n
+        self._idle_state: tuple[NDArray[np.float32], NDArray[np.float32]] | None = None
 
     # -- arrays --------------------------------------------------------------------------
     def bind(self, name: str) -> NDArray[np.float64]:
@@ -164,6 +165,7 @@ class WarpBatch:
             with wp.ScopedDevice(self.device):  # type: ignore[attr-defined]
                 self._steps(nstep)
         self._download()
+        self._contain(ids)
         self.iteration_limit += int((self.d.solver_niter.numpy() >= self.model.opt.iterations).sum())
         self.world_periods += self.n
         ctrl[...] = full[-1]
@@ -171,6 +173,24 @@ class WarpBatch:
             return {}
         rec = self._rec_buf.numpy()[:nstep]  # type: ignore[union-attr]
         return {"sensordata": np.swapaxes(rec, 0, 1)[ids].astype(float)}
+
+    def _contain(self, ids: NDArray[np.intp]) -> None:
+        """Keep a broken or idle world from disturbing the others: every world steps in every
+        call, and a world that went non-finite (or one whose trial is over, left to drift)
+        shares the batch's collision and solver passes. A non-finite world is reset on the
+        device (the host copy keeps its values for this period, so the runner sees it and
+        ends its trial); a world outside ``ids`` is put back where it was."""
+        qpos, qvel = self.d.qpos.numpy(), self.d.qvel.numpy()
+        broken = ~(np.isfinite(qpos).all(axis=1) & np.isfinite(qvel).all(axis=1))
+        idle = np.ones(self.n, dtype=bool)
+        idle[ids] = False
+        if idle.any() and self._idle_state is not None:
+            qpos[idle], qvel[idle] = self._idle_state[0][idle], self._idle_state[1][idle]
+            self.d.qpos.assign(qpos)
+            self.d.qvel.assign(qvel)
+        if broken.any():
+            self.mjw.reset_data(self.m, self.d, reset=self.wp.array(broken, dtype=bool, device=self.device))  # type: ignore[attr-defined]
+        self._idle_state = (self.d.qpos.numpy().copy(), self.d.qvel.numpy().copy())
 
     def _buffers(self, nstep: int) -> None:
         wp = self.wp
