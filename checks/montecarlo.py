@@ -32,6 +32,7 @@ from serpar.tasks.insertion_batch import Trial, TrialConfig, TrialResult, run_tr
 from serpar.tasks.ray_runner import ray_map
 from serpar.tasks.trial_start import TrialDraw, TrialStart, plan_start
 
+GPU_OR_RAY = "--gpu runs on this machine's GPU; --ray spreads CPU batches: choose one"
 BATCH = 256
 """Simulations at a time (and trials per Ray task): enough that the controller's numpy work per
 period is spread thin over the physics of many trials (~4 % at 2 threads)."""
@@ -222,7 +223,7 @@ def run_montecarlo(cfg: MonteCarloConfig, trials: int, seed: int, threads: int =
     task's trials are missing from the result, and the reason is in ``errors``. ``scene`` and
     ``engine``: another plant for a local run (``--gpu``: MuJoCo Warp, the scene at the origin)."""
     if engine is not None and ray_address is not None:
-        raise ConfigError("--gpu runs on this machine's GPU; --ray spreads CPU batches: choose one")
+        raise ConfigError(GPU_OR_RAY)
     if trials < 1 or threads < 1 or batch < 1:
         raise ConfigError(f"trials {trials}, threads {threads}, batch {batch}: each must be >= 1")
     t0 = time.perf_counter()

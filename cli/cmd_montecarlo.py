@@ -8,7 +8,13 @@ import os
 import sys
 from pathlib import Path
 
-from serpar.checks.montecarlo import BATCH, MonteCarloResult, run_montecarlo, write_parquet
+from serpar.checks.montecarlo import (
+    BATCH,
+    GPU_OR_RAY,
+    MonteCarloResult,
+    run_montecarlo,
+    write_parquet,
+)
 from serpar.checks.montecarlo_config import MonteCarloConfig
 from serpar.checks.montecarlo_gpu import CHECK_SAMPLE, check_sample, run_gpu
 from serpar.checks.montecarlo_record import FOLDER, failed_rows, record_failed
@@ -101,6 +107,8 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
                           "each must be >= 1")
     check_ray(args.ray, 1)
     if args.gpu:
+        if args.ray:
+            raise ConfigError(GPU_OR_RAY)
         if args.gpu_check < 1:
             raise ConfigError(f"--gpu-check {args.gpu_check}: a sample of at least 1 trial")
         check_device("cuda")  # before any work: the extra and a CUDA device
@@ -124,8 +132,6 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
         bar.set_postfix_str(f"{seated[0]}/{seated[1]} seated")
 
     if args.gpu:
-        if args.ray:
-            raise ConfigError("--gpu runs on this machine's GPU; --ray spreads CPU batches: choose one")
         result = run_gpu(cfg, args.trials, args.seed, args.batch, "cuda", on_rows)
     else:
         result = run_montecarlo(cfg, args.trials, args.seed, args.threads, args.batch, on_rows,

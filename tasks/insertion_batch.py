@@ -30,7 +30,7 @@ from serpar.controllers.batch_controller import BatchArmController
 from serpar.controllers.batch_sensors import Seed
 from serpar.errors import ConfigError
 from serpar.sim import names
-from serpar.sim.arm import GRIP_ACTUATOR, HOME_Q
+from serpar.sim.arm import GRIP_ACTUATOR
 from serpar.sim.arm_drive import ArmIndex
 from serpar.sim.trial_scene import TrialIds
 from serpar.tasks.episode_steps import FOLLOW_STOP_ABOVE
@@ -196,17 +196,6 @@ class _Runner:
         control = np.zeros((self.n, substeps, model.nu))
         while (active := np.flatnonzero(s.phase != DONE)).size:
             q, dq = qpos[:, arm.qpos].copy(), qvel[:, arm.dof].copy()
-            broken = ~(np.isfinite(q).all(axis=1) & np.isfinite(dq).all(axis=1) & np.isfinite(self.tau).all(axis=1))
-            if broken.any():  # an engine that does not reset a diverged state (MuJoCo Warp)
-                for i in np.flatnonzero(broken & (s.phase != DONE)):
-                    s.fault.setdefault(int(i), f"state went non-finite at t = {s.t[i]:.3f} s")
-                    s.phase[i] = DONE
-                # the controller sees a posture it can invert (the trial is over)
-                q[broken], dq[broken], self.tau[broken] = HOME_Q, 0.0, 0.0
-                active = np.flatnonzero(s.phase != DONE)
-                if not active.size:
-                    self._finish(on_result)
-                    continue
             targets(ctl, s, active, ins)
             follow(ctl, s, active, mocap, self.ids.plate_mocap)
             held_cmd = ctrl[:, arm.actuators].copy()

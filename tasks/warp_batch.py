@@ -135,6 +135,7 @@ class WarpBatch:
         self._upload()
         self.mjw.reset_data(self.m, self.d, reset=self.wp.array(mask, dtype=bool, device=self.device))  # type: ignore[attr-defined]
         self._download()
+        self.warning[mask] = 0
 
     def forward(self, ids: NDArray[np.intp] | None = None) -> None:
         self._upload()
@@ -164,22 +165,23 @@ class WarpBatch:
         else:
             with wp.ScopedDevice(self.device):  # type: ignore[attr-defined]
                 self._steps(nstep)
+        broken = self._contain(ids)
         self._download()
-        self._contain(ids)
         self.iteration_limit += int((self.d.solver_niter.numpy() >= self.model.opt.iterations).sum())
         self.world_periods += self.n
         ctrl[...] = full[-1]
         if not record:
             return {}
         rec = self._rec_buf.numpy()[:nstep]  # type: ignore[union-attr]
+        rec[:, broken] = 0.0  # as MuJoCo's batch gives a failed simulation's period
         return {"sensordata": np.swapaxes(rec, 0, 1)[ids].astype(float)}
 
-    def _contain(self, ids: NDArray[np.intp]) -> None:
-        """Keep a broken or idle world from disturbing the others: every world steps in every
-        call, and a world that went non-finite (or one whose trial is over, left to drift)
-        shares the batch's collision and solver passes. A non-finite world is reset on the
-        device (the host copy keeps its values for this period, so the runner sees it and
-        ends its trial); a world outside ``ids`` is put back where it was."""
+    def _contain(self, ids: NDArray[np.intp]) -> NDArray[np.bool_]:
+        """Do what MuJoCo does for a diverged simulation, and hold idle worlds still: every
+        world steps in every call and shares the batch's collision and solver passes. A world
+        that went non-finite is reset and counted as a warning (mjWARN_BADQACC, as MuJoCo's
+        auto-reset; the runner's health check ends its trial); a world outside ``ids`` is put
+        back where it was. Returns the broken worlds."""
         qpos, qvel = self.d.qpos.numpy(), self.d.qvel.numpy()
         broken = ~(np.isfinite(qpos).all(axis=1) & np.isfinite(qvel).all(axis=1))
         idle = np.ones(self.n, dtype=bool)
@@ -190,7 +192,9 @@ class WarpBatch:
             self.d.qvel.assign(qvel)
         if broken.any():
             self.mjw.reset_data(self.m, self.d, reset=self.wp.array(broken, dtype=bool, device=self.device))  # type: ignore[attr-defined]
+            self.warning[broken, int(mujoco.mjtWarning.mjWARN_BADQACC), 0] += 1
         self._idle_state = (self.d.qpos.numpy().copy(), self.d.qvel.numpy().copy())
+        return broken
 
     def _buffers(self, nstep: int) -> None:
         wp = self.wp

@@ -171,16 +171,14 @@ def test_a_trial_the_simulator_cannot_finish_ends_as_a_fault_and_spares_its_neig
 
 
 @pytest.mark.slow
-def test_a_trial_scene_at_the_origin_is_the_same_physics(monkeypatch) -> None:
+def test_a_trial_scene_at_the_origin_is_the_same_physics() -> None:
     """The world's origin moved to the hole entry (for a float32 engine): the same outcomes,
     peaks within 0.1 %, seated depths within 0.05 um of the cell-frame scene, float64 on CPU."""
-    import serpar.checks.montecarlo as mc
+    scene = scene_config(CFG)
     cell = [build_trial(CFG, 0, k) for k in range(2)]
-    scene = mc.scene_config
-    monkeypatch.setattr(mc, "scene_config", lambda c: dataclasses.replace(scene(c), at_origin=True))
-    moved = [mc.build_trial(CFG, 0, k) for k in range(2)]
-    assert np.allclose(TrialIds.of(moved[0].model).base, [-v for v in scene(CFG).entry])
-    chamfer, cfg = scene(CFG).chamfer, trial_config(CFG)
+    moved = [build_trial(CFG, 0, k, dataclasses.replace(scene, at_origin=True)) for k in range(2)]
+    assert np.allclose(TrialIds.of(moved[0].model).base, [-v for v in scene.entry])
+    chamfer, cfg = scene.chamfer, trial_config(CFG)
     for a, b in zip(run_trials(cell, chamfer, cfg, nthread=2), run_trials(moved, chamfer, cfg, nthread=2)):
         assert a.outcome is b.outcome is Outcome.SUCCESS
         assert abs(b.peak_force_n / a.peak_force_n - 1.0) < 1e-3
