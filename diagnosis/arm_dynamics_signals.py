@@ -142,6 +142,12 @@ def read_arm_series(rec: Recording) -> ArmSeries:
                                   f"{', '.join(missing)}: give tau_J_d of all 7 joints or none")
     cmd = np.column_stack([_column(rec, c) for c in ch.TAU_J_D]) if present else None
     sigma_tau = _sigmas(rec, ch.TAU_J, None)
+    for names, sigma in ((ch.TAU_J, sigma_tau), (ch.TAU_J_D, _sigmas(rec, ch.TAU_J_D, sigma_tau))):
+        zero = [n for n, s in zip(names, sigma) if s == 0]
+        if zero:  # the torques' misfit is judged in units of their sigma
+            raise IdentificationError(f"noise_sigma of {', '.join(zero)} is 0: the diagnosis "
+                                      "judges the torque misfit against it; state the "
+                                      "sensor's noise (> 0)")
     return ArmSeries(t, rate, q, tau, cmd, _sigmas(rec, ch.Q, None), sigma_tau,
                      _sigmas(rec, ch.TAU_J_D, sigma_tau), _load(rec, cols))
 

@@ -5,8 +5,10 @@ the stages)."""
 from __future__ import annotations
 
 import itertools
+from collections.abc import Mapping
 
 import numpy as np
+from numpy.typing import NDArray
 
 from serpar.diagnosis.empirical import EmpiricalTerm
 from serpar.diagnosis.family import Effect, Family
@@ -30,25 +32,50 @@ def shares(family: Family, path: list[Fit], heldout: Rows) -> dict[str, tuple[fl
         name = fit.active[-1]
         removed = excess(prev) - excess(fit)
         without = {k: v for k, v in fit.params.items() if k != name}
-        reach = (family.residual(fit.params, heldout) - family.residual(without, heldout)) != 0
-        before = family.residual(prev.params, heldout)[reach]
-        left = (float(before @ before) - before.size) / max(prev.n_heldout, 1)
+        after = family.residual(fit.params, heldout)
+        reach = (after - family.residual(without, heldout)) != 0
         out[name] = (float(np.clip(removed / excess0 if excess0 > 0 else 0.0, 0, 1)),
-                     float(np.clip(removed / left if left > 0 else 0.0, 0, 1)))
+                     _share_where_it_acts(family, heldout, family.residual(prev.params, heldout),
+                                          after, reach))
     return out
 
 
+def _share_where_it_acts(family: Family, heldout: Rows, before: NDArray[np.float64],
+                         after: NDArray[np.float64], reach: NDArray[np.bool_]) -> float:
+    """The share of the excess over noise it removes, judged per independent part of the data
+    (the family's ``residual_parts``: an episode's arm rows and its chamfer slides; else the
+    entries it acts on), the largest: a whole held-out excess would be clipped at the noise
+    floor, where arm rows a little under it hide what the slides above it lose."""
+    parts = getattr(family, "residual_parts", None)
+    if callable(parts):
+        b, a = parts(heldout, before), parts(heldout, after)
+        pairs = [(b[k], a[k]) for k in b]
+    else:
+        pairs = [(before[reach], after[reach])]
+    best = 0.0
+    for b_part, a_part in pairs:
+        left = float(b_part @ b_part) - b_part.size
+        if left > 0:
+            best = max(best, (float(b_part @ b_part) - float(a_part @ a_part)) / left)
+    return float(np.clip(best, 0.0, 1.0))
+
+
 def findings_of(family: Family, path: list[Fit], shares: dict[str, tuple[float, float]],
-              assessed: dict[str, Assessment], fixed: dict[str, Effect]) -> list[Finding]:
+                assessed: dict[str, Assessment], fixed: dict[str, Effect], estimate: Fit,
+                demoted: Mapping[str, tuple[str, ...]]) -> list[Finding]:
+    """One finding per selected effect. An established one takes its values from ``estimate``
+    (the established effects fitted on every row); a suspected one from the model it was last
+    judged in. ``demoted``: established effects set back to suspected afterwards, with why."""
     out = []
     for rank, (prev, fit) in enumerate(itertools.pairwise(path), start=1):
         name = fit.active[-1]
         d_bic, d_held, _ = earns(prev, fit)
         a = assessed[name]
-        effect = block_of(family, a.fit.active, name, fixed)
-        values = a.fit.params[name]
-        std = combined_std(a.fit, name, a.resampled)
-        # parameters and uncertainty from the model the effect was last judged in
+        reasons = a.reasons + tuple(demoted.get(name, ()))
+        source = estimate if not reasons and name in estimate.params else a.fit
+        effect = block_of(family, source.active, name, fixed)
+        values = source.params[name]
+        std = combined_std(source, name, a.resampled)
         estimates = tuple(ParamEstimate(p, float(v), float(s), u) for i, (p, v, s, u) in
                           enumerate(zip(effect.param_names, values, std, effect.units))
                           if i not in effect.fixed)
@@ -60,7 +87,7 @@ def findings_of(family: Family, path: list[Fit], shares: dict[str, tuple[float, 
             notes.append("not identified by these data, held at 0: "
                          + ", ".join(effect.param_names[i] for i in effect.fixed))
         out.append(Finding(rank, name, effect.summary, estimates, shares[name][0], d_bic, d_held,
-                           shares[name][1], established=not a.reasons, reasons=a.reasons,
+                           shares[name][1], established=not reasons, reasons=reasons,
                            stability=None if a.resampled is None else a.resampled.frequency,
                            note="; ".join(notes)))
     return out

@@ -16,6 +16,12 @@ of the data the family names (``residual_parts``: an episode's chamfer slides ar
 their own, or their few rows would be drowned in the arm's thousands). If the baseline alone is
 at the noise floor on held-out data the answer is literally "no missing physics found
 beyond noise".
+
+Reported values: the split chooses the model and every held-out figure is the training fit's.
+Where the model then holds on the held-out rows (their residual passes the noise test, or
+looks like noise), the values of the established effects and the baseline (findings, model
+file) are fitted on every row, since an estimate from one half has twice the variance; where
+a structured residual remains they stay the training fit's.
 """
 
 from __future__ import annotations
@@ -32,12 +38,13 @@ from serpar.diagnosis.empirical import EmpiricalTerm, characterise
 from serpar.diagnosis.empirical_refit import model_refit, outweighed
 from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.findings import excess, findings_of, shares, verdict
-from serpar.diagnosis.fit import Fit, blocks_of, earns, fit_model
+from serpar.diagnosis.fit import Fit, earns, fit_model
 from serpar.diagnosis.locate import chi2_p
 from serpar.diagnosis.residual import ResidualCheck, check_residual
 from serpar.diagnosis.result import CandidateScore, Diagnosis, ParamEstimate
 from serpar.diagnosis.stability import (
     N_FOLDS,
+    Resampled,
     assess,
     block_of,
     combined_std,
@@ -126,10 +133,15 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
     return path, scores, fixed
 
 
-def _estimates(family: Family, fit: Fit, name: str) -> tuple[ParamEstimate, ...]:
-    block = next(b for b in blocks_of(family, fit.active) if b.name == name)
-    return tuple(ParamEstimate(p, float(v), float(s), u) for p, v, s, u in
-                 zip(block.param_names, fit.params[name], fit.std[name], block.units))
+def _estimates(family: Family, fit: Fit, name: str, fixed: dict[str, Effect],
+               resampled: Resampled | None = None) -> tuple[ParamEstimate, ...]:
+    """One block's parameters with their sigma (the larger of the local one and the spread
+    over the resampled folds); parameters held at zero are not estimates and are left out."""
+    block = block_of(family, fit.active, name, fixed)
+    std = combined_std(fit, name, resampled)
+    return tuple(ParamEstimate(p, float(v), float(s), u) for i, (p, v, s, u) in
+                 enumerate(zip(block.param_names, fit.params[name], std, block.units))
+                 if i not in block.fixed)
 
 
 def diagnose(family: Family, seed: int = 0, cfg: SelectConfig | None = None,
@@ -166,7 +178,7 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
     # the model (and the file written from it) holds the established effects only
     kept, assessed, fixed = assess(family, final, {n: s[1] for n, s in effect_shares.items()}, splits,
                                    train, heldout, fixed)
-    found = findings_of(family, path, effect_shares, assessed, fixed)
+    demoted: dict[str, tuple[str, ...]] = {}
     every = np.concatenate([train, heldout])
     before = family.residual(base.params, heldout)
     after = family.residual(kept.params, heldout)
@@ -190,8 +202,7 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
             # an established effect that only stood in for the physics the empirical term
             # describes is not a finding: demote it, refit the rest, characterise again
             why = "it no longer earns its parameters once the empirical term is in the model"
-            found = [replace(f, established=False, reasons=f.reasons + (why,))
-                     if f.effect in stand_ins else f for f in found]
+            demoted = {name: (why,) for name in stand_ins}
             kept, fixed = fit_identified(family, tuple(a for a in kept.active
                                                        if a not in stand_ins),
                                          train, heldout, kept.params, fixed)
@@ -202,16 +213,24 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
                                      train, heldout, splits, n_channels, every)
     if residual.structured is False and empirical is not None:
         residual, empirical = noise_like_but_explained(residual, empirical)
+    # the values from every row where the model holds on the rows it never saw: the split
+    # chose and scored it (the held-out figures stay the training fit's), and an estimate
+    # from half the rows has twice the variance. Where structure is left the model is known
+    # to be wrong, and rows it fails on would pull its values toward a compromise.
+    adequate = residual.passes or residual.structured is False
+    estimate = (fit_model(family, kept.active, np.sort(every), np.zeros(0, np.int64),
+                          kept.params, fixed) if adequate else kept)
+    found = findings_of(family, path, effect_shares, assessed, fixed, estimate, demoted)
     # quiet only if no part of the data is beyond noise: the rule selection stops by
     quiet = not beyond_noise(family, base, heldout, cfg.alpha)
     words = verdict(found, quiet, residual.words, empirical)
-    baseline = (_estimates(family, kept, family.baseline.name)
+    baseline = (_estimates(family, estimate, family.baseline.name, fixed)
                 if family.baseline is not None else ())
-    model = {name: {"values": [float(v) for v in kept.params[name]],
+    model = {name: {"values": [float(v) for v in estimate.params[name]],
                     "std": [float(s) for s in combined_std(
-                        kept, name, assessed[name].resampled if name in assessed else None)],
+                        estimate, name, assessed[name].resampled if name in assessed else None)],
                     "names": list(block_of(family, kept.active, name, fixed).param_names)}
-             for name in kept.params}
+             for name in estimate.params}
     explained = (excess0 - excess(kept)) / excess0 if excess0 > 0 else 0.0
     return Diagnosis(
         kind=family.kind, verdict=words, findings=tuple(found), candidates=tuple(scores),

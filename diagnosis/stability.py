@@ -22,7 +22,8 @@ An effect the forward selection kept is *established* only when
   moves every joint's command by a few sigma; some joints want a third of that delay, others
   twice or three times it.
 
-Uncertainties are the larger of the local (Jacobian) one and the spread over the folds.
+Uncertainties are the larger of the local (Jacobian) one and the delete-a-group jackknife over
+the folds (:attr:`Resampled.jackknife_std`).
 Everything else the selection kept is "suspected, not established", with the reasons.
 """
 
@@ -79,10 +80,16 @@ class Resampled:
         return self.kept / self.folds if self.folds else 0.0
 
     @property
-    def spread(self) -> NDArray[np.float64]:
-        """Standard deviation of each parameter over the folds."""
-        return self.values.std(axis=0, ddof=1) if len(self.values) > 1 else np.zeros(
-            self.values.shape[1])
+    def jackknife_std(self) -> NDArray[np.float64]:
+        """Each parameter's standard error by the delete-a-group jackknife over the k folds,
+        sqrt((k-1)/k * sum (x_i - mean)^2): the error of the estimate from every row, model
+        error included. The plain spread of the fold estimates is (k-1)/sqrt(k) times smaller
+        (each two folds share all but two k-ths of their rows)."""
+        k = len(self.values)
+        if k < 2:
+            return np.zeros(self.values.shape[1])
+        dev = self.values - self.values.mean(axis=0)
+        return np.sqrt((k - 1) / k * np.sum(dev**2, axis=0))
 
 
 def folds(family: Family, k: int = N_FOLDS) -> list[tuple[Rows, Rows]]:
@@ -285,9 +292,9 @@ def assess(family: Family, final: Fit, share_of_remaining: Mapping[str, float],
 
 
 def combined_std(fit: Fit, name: str, resampled: Resampled | None) -> NDArray[np.float64]:
-    """The larger of the local (Jacobian) sigma and the spread over the resampled folds."""
+    """The larger of the local (Jacobian) sigma and the jackknife over the resampled folds."""
     local = np.asarray(fit.std[name], float)
-    return local if resampled is None else np.maximum(local, resampled.spread)
+    return local if resampled is None else np.maximum(local, resampled.jackknife_std)
 
 
 def block_of(family: Family, active: tuple[str, ...], name: str,

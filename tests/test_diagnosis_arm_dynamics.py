@@ -339,6 +339,16 @@ def test_bad_input_is_one_line_naming_the_problem(change, message: str) -> None:
     assert "\n" not in str(err.value)
 
 
+def test_a_torque_sensor_stated_noiseless_is_refused() -> None:
+    """A stated sigma of 0 (an ideal sensor) cannot whiten the torque misfit: one line naming
+    the channel, not a singular fit."""
+    rec = twin(None)[0]
+    sigma = {**rec.meta.noise_sigma, "tau_J3": 0.0}
+    bad = Recording(dataclasses.replace(rec.meta, noise_sigma=sigma), rec.signals)
+    with pytest.raises(IdentificationError, match=r"noise_sigma of tau_J3 is 0: .*> 0\)$"):
+        family_from_recording(bad)
+
+
 def _measured_torque_only(effect: str) -> Recording:
     rec = twin(effect)[0]
     keep = [c for c in rec.signals.column_names if not c.startswith("tau_J_d")]

@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from serpar.diagnosis import Effect, LocateRow
+from serpar.diagnosis.findings import shares
+from serpar.diagnosis.fit import fit_model
 from serpar.diagnosis.locate import locate_rows
 from serpar.diagnosis.select import SelectConfig, diagnose
 from serpar.errors import IdentificationError
@@ -81,6 +83,39 @@ def test_two_effects_by_forward_selection() -> None:
     assert {f.effect for f in d.findings} == {"slope", "sine"}
     assert "curve" not in {f.effect for f in d.findings}
     assert d.heldout_rms_after < 1.5
+
+
+def test_values_come_from_every_row_and_held_out_figures_from_the_training_fit() -> None:
+    """The split chooses and scores the model; the established values are then fitted on every
+    row (least squares of offset + slope on all 300), with the smaller sigma that gives."""
+    line = Line({"slope": 0.02}, seed=3)
+    d = diagnose(line, cfg=SelectConfig(folds=0))
+    design = np.stack([np.ones_like(line.t), line.t], axis=1)
+    every, *_ = np.linalg.lstsq(design, line.y, rcond=None)
+    cut = 2 * line.n_samples // 3
+    train, *_ = np.linalg.lstsq(design[:cut], line.y[:cut], rcond=None)
+    (slope,) = d.findings[0].params
+    assert slope.value == pytest.approx(every[1], rel=1e-6)
+    assert abs(slope.value - train[1]) > 1e-6  # the training fit's is another value
+    assert d.model["params"]["slope"]["values"][0] == pytest.approx(every[1], rel=1e-6)
+    sigma_every = SIGMA * np.sqrt(np.linalg.inv(design.T @ design)[1, 1])
+    sigma_train = SIGMA * np.sqrt(np.linalg.inv(design[:cut].T @ design[:cut])[1, 1])
+    assert slope.std == pytest.approx(sigma_every, rel=0.2) and slope.std < 0.8 * sigma_train
+    held = design[cut:] @ train - line.y[cut:]
+    assert d.heldout_rms_after == pytest.approx(np.sqrt(np.mean(held**2)) / SIGMA, rel=1e-6)
+
+
+def test_a_model_that_fails_on_held_out_rows_keeps_its_training_values() -> None:
+    """A quadratic drift with only the linear candidate: the held-out residual is beyond noise,
+    so the slope is not refitted on rows the model cannot follow."""
+    line = Line({"slope": 0.02, "curv": 0.002}, seed=3)
+    line.effects = tuple(e for e in line.effects if e.name != "curve")
+    d = diagnose(line, cfg=SelectConfig(folds=0))
+    assert d.top_effect == "slope" and not d.residual.passes
+    cut = 2 * line.n_samples // 3
+    design = np.stack([np.ones_like(line.t), line.t], axis=1)
+    train, *_ = np.linalg.lstsq(design[:cut], line.y[:cut], rcond=None)
+    assert d.findings[0].params[0].value == pytest.approx(train[1], rel=1e-6)
 
 
 def test_an_effect_must_earn_its_parameters() -> None:
@@ -166,3 +201,15 @@ def test_a_small_part_beyond_noise_keeps_selection_going() -> None:
     assert diagnose(LineWithProbes(parts=False), cfg=SelectConfig(max_effects=0)).no_missing_physics
     unexplained = diagnose(LineWithProbes(parts=True), cfg=SelectConfig(max_effects=0))
     assert not unexplained.no_missing_physics and "no candidate" in unexplained.verdict
+
+
+def test_an_effect_on_a_small_part_is_judged_on_that_part() -> None:
+    """The line's held-out rows read 0.9 sigma, so the whole held-out residual is under its
+    noise floor; the probe effect still removes what the probes hold above it, and its share of
+    what was left is judged on them (not 0 % of a clipped whole)."""
+    fam = LineWithProbes(parts=True)
+    fam.y = 0.3 + 0.9 * (fam.y - 0.3)
+    train, held = fam.split(np.random.default_rng(0))
+    path = [fit_model(fam, (), train, held), fit_model(fam, ("probe",), train, held)]
+    assert path[0].heldout_chi2 < path[0].n_heldout  # the whole: under the floor
+    assert shares(fam, path, held)["probe"][1] > 0.9

@@ -181,6 +181,8 @@ def test_higher_contact_friction_is_found_in_the_chamfer_slides(episodes) -> Non
     found = [f for f in diag.findings if f.effect == "contact_friction"]
     assert found, (diag.verdict, "slide mu", (1 - ratio) / (1 + ratio))
     finding = found[0]
+    # established: judged on the slides, not on the arm rows under their noise floor
+    assert finding.established, finding.reasons
     (d_mu,) = finding.params
     mu = NOMINAL_MU + d_mu.value
     assert abs(mu - CONTACT_MU) <= 3 * d_mu.std, (mu, d_mu.std)

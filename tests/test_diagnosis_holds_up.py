@@ -18,6 +18,7 @@ from serpar.diagnosis.arm_static_family import family_from_data
 from serpar.diagnosis.choose import family_from_recording
 from serpar.diagnosis.residual import consecutive_noise_ratio
 from serpar.diagnosis.select import diagnose
+from serpar.diagnosis.stability import Resampled
 from serpar.twins.registry import make_twin
 
 PANDA_1 = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "panda_1"
@@ -202,3 +203,11 @@ def test_twin_sigma_error_is_validated() -> None:
     nominal, _ = make_twin(None, None, 0, "arm_static")
     assert (static.meta.model["measurements"]["sigma_m"]
             == pytest.approx(nominal.meta.model["measurements"]["sigma_m"] / 2))
+
+
+def test_the_folds_give_a_jackknife_standard_error() -> None:
+    """sqrt((k-1)/k * sum of squared deviations): for 1..5 that is sqrt(8), where the plain
+    spread of the fold estimates (std, ddof 1) is 1.58."""
+    r = Resampled("e", 5, 5, np.arange(1.0, 6.0)[:, None], True)
+    assert r.jackknife_std[0] == pytest.approx(np.sqrt(8.0))
+    assert Resampled("e", 1, 1, np.ones((1, 2)), True).jackknife_std.tolist() == [0.0, 0.0]
