@@ -192,6 +192,13 @@ class CellRuntime:
                 probe()
             if s == 0:  # after the switch substep: the command alone
                 d.ctrl[motors] = new
+        if adc.reads_period_end:
+            # drives that act late put a switch inside the period; the torque at its end is one
+            # the next command does not touch yet (the trajectory is unchanged by this forward)
+            if drive is not None:
+                drive(d)
+            mujoco.mj_forward(m, d)
+            adc.end(d)
         self.time += self.arm.dt
         self._check_health()
         for observer in self.observers:

@@ -142,9 +142,11 @@ class _Runner:
         self.next += slots.size
         trials = [self._first if i == 0 else self.trials[int(i)] for i in k]
         for slot, t in zip(slots, trials):
-            if t.model.sensor_delay[self.arm.torque_sensors].any():
-                raise ConfigError("a trial's torque sensors have a delay: the batch's period mean "
-                                  "is the undelayed one (controllers/arm_sensors.py TorqueADC)")
+            if (t.model.sensor_delay[self.arm.torque_sensors].any()
+                    or t.model.actuator_delay[self.arm.actuators].any()):
+                raise ConfigError("a trial's torque sensors or arm actuators have a delay: the "
+                                  "batch's period mean is the undelayed one "
+                                  "(controllers/arm_sensors.py TorqueADC)")
             self.models[slot] = t.model
         batch, arm, ids = self.batch, self.arm, self.ids
         batch.set_models(self.models)

@@ -185,13 +185,15 @@ def test_a_trial_scene_at_the_origin_is_the_same_physics() -> None:
         assert abs(b.depth_shortfall_mm - a.depth_shortfall_mm) < 5e-5
 
 
-def test_a_trial_with_delayed_torque_sensors_is_refused() -> None:
-    """The batch's period mean is the undelayed sensors' (TorqueADC.weights): a delayed one
-    would be misread, so it is refused, not run."""
+@pytest.mark.parametrize("field", ["sensor_delay", "actuator_delay"])
+def test_a_trial_with_delayed_torque_sensors_or_drives_is_refused(field: str) -> None:
+    """The batch's period mean is the undelayed sensors' of undelayed drives (TorqueADC.weights):
+    either delay would be misread, so it is refused, not run."""
     base = build_trial(CFG, 0, 0)
     model = copy.copy(base.model)
-    model.sensor_delay[ArmIndex.from_model(model, names.ARM).torque_sensors] = 1e-3
-    with pytest.raises(ConfigError, match="torque sensors have a delay"):
+    arm = ArmIndex.from_model(model, names.ARM)
+    getattr(model, field)[arm.torque_sensors if field == "sensor_delay" else arm.actuators] = 1e-3
+    with pytest.raises(ConfigError, match="torque sensors or arm actuators have a delay"):
         run_trials([Trial(model, base.start, base.seed, base.hole_diameter)], scene_config(CFG).chamfer,
                    trial_config(CFG))
 

@@ -4,7 +4,8 @@ against the undelayed sensor, over the windowed rate) is the delay, at both phys
 
 The extrapolating ends of the undelayed ADC straddle a delayed command switch: at the 0.1 ms
 step a 0.712 ms lag read as 0.709 ms and 0.817 ms as 0.796 ms (concealed cells read 3 us
-early); the history's trapezoid reads both within 0.1 %."""
+early); the history's trapezoid reads both within 0.1 %. Undelayed sensors on an arm whose
+actuators act late read as the plain trapezoid with the period's true end does, to 1 us."""
 
 from __future__ import annotations
 
@@ -50,6 +51,9 @@ def _run(changes: ArmPlantChanges, dt: float, with_model: bool = True
             mujoco.mj_step(model, data)
             adc.sample(data, s, model if with_model else None)
             period.append(data.sensordata[np.asarray(index.torque_adr)].copy())
+        if adc.reads_period_end:  # as the runtime does (controllers/cell_runtime.py)
+            mujoco.mj_forward(model, data)
+            adc.end(data)
         held = new
         out.append(adc.mean())
         samples.append(period)
@@ -90,11 +94,13 @@ def test_the_extrapolating_ends_misread_a_delayed_switch() -> None:
     assert abs(read / 0.8171e-3 - 1.0) > 0.01
 
 
-def _actuation_delayed(delay: float) -> tuple[np.ndarray, np.ndarray]:
-    """Undelayed sensors on an arm whose actuators act ``delay`` late: the ADC's period means,
-    and the plain trapezoid with the period's true end (the next period's first sample, which
-    for a delay of a step or more the next command does not touch)."""
-    means, x = _run(ArmPlantChanges(actuation_delay=delay), 1e-4)
+def _actuation_delayed(delay: float, with_model: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Undelayed sensors on an arm whose actuators act ``delay`` late: the ADC's period means
+    (with the period end the runtime hands it; without the model, the extrapolated ends of an
+    ADC that knows of no delay), and the
+    plain trapezoid with the period's true end (the next period's first sample, which for a
+    delay of a step or more the next command does not touch)."""
+    means, x = _run(ArmPlantChanges(actuation_delay=delay), 1e-4, with_model)
     substeps = x.shape[1]
     w = np.full(substeps, 1.0 / substeps)
     w[0] *= 0.5
@@ -102,13 +108,13 @@ def _actuation_delayed(delay: float) -> tuple[np.ndarray, np.ndarray]:
     return means[:-1], trapezoid
 
 
-@pytest.mark.xfail(strict=True, reason="known: an actuation delay whose switch lands in the "
-                   "ADC's extrapolated start or end (0.85 ms, 1.163 ms at 0.1 ms steps) is "
-                   "misread by 13-16 us; the fix needs the period end's torque before the next "
-                   "command (docs/sim2real.md)")
 def test_undelayed_sensors_read_a_delayed_actuation_as_the_trapezoid_does() -> None:
-    reference = _period_means(0.0, 1e-4)
+    """Delays whose switch lands mid-period and in the start or end stencil (1.163, 0.85 ms at
+    the 0.1 ms step) read alike, to 1 us; the extrapolated ends misread them by 12-16 us."""
+    reference = _period_means(0.0, 1e-4)[:-1]
     for delay in (0.5436e-3, 0.85e-3, 1.163e-3):
         adc, trapezoid = _actuation_delayed(delay)
-        gap = _lag_read(adc, reference[:-1]) - _lag_read(trapezoid, reference[:-1])
+        gap = _lag_read(adc, reference) - _lag_read(trapezoid, reference)
         assert abs(gap) < 1e-6, (delay, gap)
+    adc, trapezoid = _actuation_delayed(0.85e-3, with_model=False)
+    assert _lag_read(adc, reference) - _lag_read(trapezoid, reference) < -10e-6
