@@ -121,6 +121,8 @@ class TorqueADC:
                        else np.zeros(0, int))
         """Undelayed sensors of an arm whose actuators act late: their period end is read at
         the end's state (:meth:`end`)."""
+        self._at_end_adr = adr[self.at_end]
+        self._readings = substeps + (1 if self.at_end.size else 0)
         self._weights = np.repeat(self.weights[:, None], len(adr), axis=1)  # substep x sensor
         if self.delayed.size or self.at_end.size:
             trapezoid = np.ones(substeps)
@@ -159,11 +161,9 @@ class TorqueADC:
     def end(self, data: mujoco.MjData) -> None:
         """The period's end for :attr:`at_end`: ``data`` evaluated (``mj_forward``) at the
         state after the last substep, before the next command."""
-        reading = data.sensordata[self._adr[self.at_end]]
-        self._sum[self.at_end] += self._end_weight * reading
+        self._sum[self.at_end] += self._end_weight * data.sensordata[self._at_end_adr]
         self._n += 1
 
     def mean(self) -> Vec | None:
         """The period's mean torque, or None before a whole period was sampled."""
-        done = len(self.weights) + (1 if self.at_end.size else 0)
-        return self._sum.copy() if self._n == done else None
+        return self._sum.copy() if self._n == self._readings else None

@@ -60,6 +60,14 @@ def _share_where_it_acts(family: Family, heldout: Rows, before: NDArray[np.float
     return float(np.clip(best, 0.0, 1.0))
 
 
+def param_estimates(effect: Effect, values: NDArray[np.float64], std: NDArray[np.float64]
+                    ) -> tuple[ParamEstimate, ...]:
+    """A block's parameters with their sigma; those held at zero are not estimates: left out."""
+    return tuple(ParamEstimate(p, float(v), float(s), u) for i, (p, v, s, u) in
+                 enumerate(zip(effect.param_names, values, std, effect.units))
+                 if i not in effect.fixed)
+
+
 def findings_of(family: Family, path: list[Fit], shares: dict[str, tuple[float, float]],
                 assessed: dict[str, Assessment], fixed: dict[str, Effect], estimate: Fit,
                 demoted: Mapping[str, tuple[str, ...]]) -> list[Finding]:
@@ -76,9 +84,7 @@ def findings_of(family: Family, path: list[Fit], shares: dict[str, tuple[float, 
         effect = block_of(family, source.active, name, fixed)
         values = source.params[name]
         std = combined_std(source, name, a.resampled)
-        estimates = tuple(ParamEstimate(p, float(v), float(s), u) for i, (p, v, s, u) in
-                          enumerate(zip(effect.param_names, values, std, effect.units))
-                          if i not in effect.fixed)
+        estimates = param_estimates(effect, values, std)
         notes = []
         if effect.excess_words and values[0] < 0:
             notes.append(effect.excess_words.format(

@@ -37,14 +37,13 @@ from threadpoolctl import threadpool_limits
 from serpar.diagnosis.empirical import EmpiricalTerm, characterise
 from serpar.diagnosis.empirical_refit import model_refit, outweighed
 from serpar.diagnosis.family import Effect, Family
-from serpar.diagnosis.findings import excess, findings_of, shares, verdict
+from serpar.diagnosis.findings import excess, findings_of, param_estimates, shares, verdict
 from serpar.diagnosis.fit import Fit, earns, fit_model
 from serpar.diagnosis.locate import chi2_p
 from serpar.diagnosis.residual import ResidualCheck, check_residual
-from serpar.diagnosis.result import CandidateScore, Diagnosis, ParamEstimate
+from serpar.diagnosis.result import CandidateScore, Diagnosis
 from serpar.diagnosis.stability import (
     N_FOLDS,
-    Resampled,
     assess,
     block_of,
     combined_std,
@@ -133,17 +132,6 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
     return path, scores, fixed
 
 
-def _estimates(family: Family, fit: Fit, name: str, fixed: dict[str, Effect],
-               resampled: Resampled | None = None) -> tuple[ParamEstimate, ...]:
-    """One block's parameters with their sigma (the larger of the local one and the spread
-    over the resampled folds); parameters held at zero are not estimates and are left out."""
-    block = block_of(family, fit.active, name, fixed)
-    std = combined_std(fit, name, resampled)
-    return tuple(ParamEstimate(p, float(v), float(s), u) for i, (p, v, s, u) in
-                 enumerate(zip(block.param_names, fit.params[name], std, block.units))
-                 if i not in block.fixed)
-
-
 def diagnose(family: Family, seed: int = 0, cfg: SelectConfig | None = None,
              report: Progress | None = None) -> Diagnosis:
     """Run every stage on one family; the result holds the findings and the evidence."""
@@ -224,7 +212,8 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
     # quiet only if no part of the data is beyond noise: the rule selection stops by
     quiet = not beyond_noise(family, base, heldout, cfg.alpha)
     words = verdict(found, quiet, residual.words, empirical)
-    baseline = (_estimates(family, estimate, family.baseline.name, fixed)
+    baseline = (param_estimates(family.baseline, estimate.params[family.baseline.name],
+                                estimate.std[family.baseline.name])
                 if family.baseline is not None else ())
     model = {name: {"values": [float(v) for v in estimate.params[name]],
                     "std": [float(s) for s in combined_std(

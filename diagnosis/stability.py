@@ -22,8 +22,7 @@ An effect the forward selection kept is *established* only when
   moves every joint's command by a few sigma; some joints want a third of that delay, others
   twice or three times it.
 
-Uncertainties are the larger of the local (Jacobian) one and the delete-a-group jackknife over
-the folds (:attr:`Resampled.jackknife_std`).
+Uncertainties: the larger of the local (Jacobian) one and the folds' jackknife (Resampled).
 Everything else the selection kept is "suspected, not established", with the reasons.
 """
 
@@ -81,10 +80,9 @@ class Resampled:
 
     @property
     def jackknife_std(self) -> NDArray[np.float64]:
-        """Each parameter's standard error by the delete-a-group jackknife over the k folds,
-        sqrt((k-1)/k * sum (x_i - mean)^2): the error of the estimate from every row, model
-        error included. The plain spread of the fold estimates is (k-1)/sqrt(k) times smaller
-        (each two folds share all but two k-ths of their rows)."""
+        """Each parameter's delete-a-group jackknife error over the k folds, sqrt((k-1)/k *
+        sum (x_i - mean)^2), model error included: (k-1)/sqrt(k) times the folds' plain spread,
+        as each two folds share all but two k-ths of their rows."""
         k = len(self.values)
         if k < 2:
             return np.zeros(self.values.shape[1])
