@@ -30,7 +30,7 @@ from serpar.sim.tolerances import BODY_H6, HOLE_H7, JOURNAL_H6
 from serpar.sim.trial_scene import TrialSceneConfig, build_trial_spec
 from serpar.tasks.insertion_batch import run_trials
 from serpar.tasks.trial_start import TrialDraw
-from serpar.tasks.warp_batch import WarpBatch, check_device
+from serpar.tasks.warp_batch import EPA_HORIZON_EDGES, WarpBatch, check_device
 
 BOUNDARY_SHIFT_M = 2e-6
 CHECK_SAMPLE = 64
@@ -67,6 +67,9 @@ def run_gpu(cfg: MonteCarloConfig, trials: int, seed: int, batch: int, device: s
     if total:
         result.notes.append(f"MuJoCo Warp's solver stopped at its iteration limit in {limit} of {total} "
                             f"world-periods ({100 * limit / total:.1f} %; float32 short of the tolerance)")
+        epa = sum(e.epa_overflow for e in engines)
+        result.notes.append(f"MuJoCo Warp's EPA horizon ({EPA_HORIZON_EDGES} edges) overflowed in {epa} of "
+                            f"{total} world-periods (a mesh pair without its contact for a step)")
     return result
 
 

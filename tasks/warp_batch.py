@@ -16,9 +16,8 @@ the bore facets are moved radially so that each world's inner faces sit at its h
 radius (within 0.1 um), and the journal tip is the thinnest journal's.
 
 MuJoCo Warp is float32: use a scene ``at_origin`` (sim/trial_scene.py). Experimental: on
-warp's CPU device a trial alone seats as in float64 (peak force 17.6 N against 5.32 N: a
-seated journal's contacts chatter), but trials of different draws in one batch blow up in
-contact (docs/montecarlo.md, "On a GPU").
+warp's CPU device the float32 grasp lets the part sink 5-37 um into a pad now and then, and
+trials blow up once the journal meets the bore (docs/montecarlo.md, "On a GPU").
 """
 
 from __future__ import annotations
@@ -40,6 +39,10 @@ PER_WORLD = ("geom_size", "geom_pos", "geom_quat", "geom_rbound", "geom_aabb", "
              "dof_invweight0")
 """Model fields that differ between trials' models and MuJoCo Warp takes per world."""
 INSTALL = "pip install 'serpar[gpu]' (mujoco-warp, warp-lang)"
+EPA_HORIZON_EDGES = 128
+"""Edges MuJoCo Warp's EPA may keep on a polytope's horizon. Its default, 24, overflows on the
+journal tip's and the bore facets' meshes on a GPU, and an overflowing pair gets no contact for
+that step (a seated journal drops into the bore, then is kicked out of a deep penetration)."""
 
 
 def load_warp() -> tuple[object, object]:
@@ -48,8 +51,12 @@ def load_warp() -> tuple[object, object]:
         import warp
         warp.config.log_level = logging.WARNING  # its start-up banner would go to stdout, ahead of --json
         import mujoco_warp
+        from mujoco_warp._src import (
+            collision_convex,  # the buffer is sized from this module constant
+        )
     except ImportError as exc:
         raise ConfigError(f"--gpu needs MuJoCo Warp ({exc.name} is not installed): {INSTALL}") from None
+    collision_convex.MJ_MAX_EPAHORIZON = max(collision_convex.MJ_MAX_EPAHORIZON, EPA_HORIZON_EDGES)
     return warp, mujoco_warp
 
 
@@ -78,14 +85,18 @@ class WarpBatch:
         self.model, self.n, self.device = model, n, check_device(device)
         with wp.ScopedDevice(device):  # type: ignore[attr-defined]
             self.m = mjw.put_model(model, batch_sizes=dict.fromkeys(PER_WORLD, n))  # type: ignore[attr-defined]
-            self.d = mjw.make_data(model, nworld=n, nconmax=contacts_per_world * n,  # type: ignore[attr-defined]
+            self.d = mjw.make_data(model, nworld=n, nconmax=contacts_per_world,  # type: ignore[attr-defined]
                                    njmax=constraints_per_world)
         # the float32 solver often stops at its iteration limit short of the tolerance:
         # counted here (iteration_limit) instead of printed to stdout on every step
-        quiet = int(mjw.OverflowType.ITERATIONS) | int(mjw.OverflowType.LS_ITERATIONS)  # type: ignore[attr-defined]
+        # and EPA's horizon buffer overflows are counted (epa_overflow), not printed per step
+        self._epa = int(mjw.OverflowType.EPA_HORIZON)  # type: ignore[attr-defined]
+        quiet = int(mjw.OverflowType.ITERATIONS) | int(mjw.OverflowType.LS_ITERATIONS) | self._epa  # type: ignore[attr-defined]
         self.m.opt.warn_overflow = int(self.m.opt.warn_overflow) & ~quiet
         self.iteration_limit = 0
         """World-periods whose last step stopped at the solver's iteration limit."""
+        self.epa_overflow = 0
+        """World-periods in which a mesh pair's EPA horizon overflowed (that pair had no contact)."""
         self.world_periods = 0
         self._host: dict[str, NDArray[np.float64]] = {}
         self.status = np.zeros(n, dtype=np.int32)
@@ -93,7 +104,6 @@ class WarpBatch:
         self._graphs: dict[int, object] = {}
         self._ctrl_buf = self._rec_buf = None
         self._models: list[mujoco.MjModel] = [model] * n
-        self._idle_state: tuple[NDArray[np.float32], NDArray[np.float32]] | None = None
 
     # -- arrays --------------------------------------------------------------------------
     def bind(self, name: str) -> NDArray[np.float64]:
@@ -156,6 +166,7 @@ class WarpBatch:
         self._buffers(nstep)
         self._ctrl_buf.assign(full.astype(np.float32))  # type: ignore[union-attr]
         self._upload()
+        start = (self.d.qpos.numpy().copy(), self.d.qvel.numpy().copy())
         if self.device == "cuda":
             if nstep not in self._graphs:
                 with wp.ScopedCapture(device=self.device) as capture:  # type: ignore[attr-defined]
@@ -165,9 +176,11 @@ class WarpBatch:
         else:
             with wp.ScopedDevice(self.device):  # type: ignore[attr-defined]
                 self._steps(nstep)
-        broken = self._contain(ids)
+        broken = self._contain(ids, start)
         self._download()
         self.iteration_limit += int((self.d.solver_niter.numpy() >= self.model.opt.iterations).sum())
+        self.epa_overflow += int(((self.d.overflow.numpy() & self._epa) != 0).sum())
+        self.d.overflow.zero_()
         self.world_periods += self.n
         ctrl[...] = full[-1]
         if not record:
@@ -176,24 +189,26 @@ class WarpBatch:
         rec[:, broken] = 0.0  # as MuJoCo's batch gives a failed simulation's period
         return {"sensordata": np.swapaxes(rec, 0, 1)[ids].astype(float)}
 
-    def _contain(self, ids: NDArray[np.intp]) -> NDArray[np.bool_]:
-        """Do what MuJoCo does for a diverged simulation, and hold idle worlds still: every
-        world steps in every call and shares the batch's collision and solver passes. A world
-        that went non-finite is reset and counted as a warning (mjWARN_BADQACC, as MuJoCo's
-        auto-reset; the runner's health check ends its trial); a world outside ``ids`` is put
-        back where it was. Returns the broken worlds."""
+    def _contain(self, ids: NDArray[np.intp],
+                 start: tuple[NDArray[np.float32], NDArray[np.float32]]) -> NDArray[np.bool_]:
+        """Do what MuJoCo's batch does for a diverged simulation, and hold idle worlds still:
+        every world steps in every call and shares the batch's collision and solver passes. A
+        world that went non-finite is put back at its ``start`` (the call's first state) and
+        counted as a warning (mjWARN_BADQACC; the runner's health check ends its trial); not
+        reset to qpos0, where the arm is singular and the controller's next update would fail
+        over the whole batch. A world outside ``ids`` is put back at its start too. Returns the
+        broken worlds."""
         qpos, qvel = self.d.qpos.numpy(), self.d.qvel.numpy()
         broken = ~(np.isfinite(qpos).all(axis=1) & np.isfinite(qvel).all(axis=1))
-        idle = np.ones(self.n, dtype=bool)
-        idle[ids] = False
-        if idle.any() and self._idle_state is not None:
-            qpos[idle], qvel[idle] = self._idle_state[0][idle], self._idle_state[1][idle]
+        back = np.ones(self.n, dtype=bool)
+        back[ids] = False
+        back |= broken
+        if back.any():
+            qpos[back], qvel[back] = start[0][back], start[1][back]
             self.d.qpos.assign(qpos)
             self.d.qvel.assign(qvel)
         if broken.any():
-            self.mjw.reset_data(self.m, self.d, reset=self.wp.array(broken, dtype=bool, device=self.device))  # type: ignore[attr-defined]
             self.warning[broken, int(mujoco.mjtWarning.mjWARN_BADQACC), 0] += 1
-        self._idle_state = (self.d.qpos.numpy().copy(), self.d.qvel.numpy().copy())
         return broken
 
     def _buffers(self, nstep: int) -> None:

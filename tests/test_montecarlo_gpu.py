@@ -75,3 +75,47 @@ def test_warp_trials_agree_with_float64_on_a_small_batch() -> None:
     gpu_height = np.array([r.result.depth_shortfall_mm for r in result.rows])
     cpu_height = np.array([r.result.depth_shortfall_mm for r in cpu.rows])
     assert np.all(np.abs(gpu_height - cpu_height) < 0.01)  # float32 within 10 um of float64
+
+
+BOX_ON_PLANE = """<mujoco><option timestep="0.001"/><worldbody><geom type="plane" size="1 1 .1"/>
+<body pos="0 0 .2"><joint name="z" type="slide"/><geom type="box" size=".05 .05 .05"/></body></worldbody>
+<actuator><motor joint="z"/></actuator><sensor><jointpos joint="z"/></sensor></mujoco>"""
+
+
+@pytest.mark.skipif(not HAS_WARP, reason="the gpu extra (mujoco-warp) is not installed")
+def test_contact_buffers_are_sized_per_world() -> None:
+    """``contacts_per_world`` is per world: the batch's buffer holds that many for each world (a
+    buffer of contacts_per_world x n per world asked 9.7 GB of a GPU for 512 worlds)."""
+    import mujoco
+
+    from serpar.tasks.warp_batch import WarpBatch
+    batch = WarpBatch(mujoco.MjModel.from_xml_string(BOX_ON_PLANE), 3, "cpu", contacts_per_world=64)
+    assert int(batch.d.naconmax) == 64 * 3
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not HAS_WARP, reason="the gpu extra (mujoco-warp) is not installed")
+def test_a_diverged_world_is_put_back_at_its_start_and_the_others_step_on() -> None:
+    """A world that goes non-finite in a call is put back where the call began it (not at qpos0,
+    where the arm is singular for the controller) and counted as a bad-acceleration warning; a
+    falling box in the world beside it falls as it does alone."""
+    import mujoco
+
+    from serpar.tasks.warp_batch import WarpBatch
+    model = mujoco.MjModel.from_xml_string(BOX_ON_PLANE)
+    batch = WarpBatch(model, 2, "cpu")
+    batch.reset(np.arange(2))
+    qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
+    qpos[:, 0] = 0.05  # away from qpos0, where a reset would put it
+    start = qpos.copy()
+    control = np.zeros((2, 10, 1))
+    control[1] = np.nan  # world 1's motor diverges it
+    batch.rollout(10, control)
+    assert np.abs(qpos[1] - start[1]).max() < 1e-8 and np.isfinite(qvel[1]).all()  # float32 of its start
+    assert batch.warning[1, int(mujoco.mjtWarning.mjWARN_BADQACC), 0] == 1
+    assert batch.warning[0].sum() == 0
+    alone = mujoco.MjData(model)
+    alone.qpos[0] = 0.05
+    for _ in range(10):
+        mujoco.mj_step(model, alone)
+    assert qpos[0, 0] < 0.05 and abs(qpos[0, 0] - alone.qpos[0]) < 1e-6  # float32 against float64 over 10 free-fall steps
