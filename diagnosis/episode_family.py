@@ -106,7 +106,7 @@ class EpisodeFamily:
         return rows[rows < self.n_arm], rows[rows >= self.n_arm] - self.n_arm
 
     def residual(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
-        """The arm rows' residuals (14 each) first, then one per chamfer slide."""
+        """The arm rows' residuals (one per arm channel each) first, then one per chamfer slide."""
         arm, slide = self._parts(rows)
         out = self.inner.residual({k: v for k, v in params.items() if k != FRICTION.name},
                                   self.keep[arm])
@@ -179,16 +179,18 @@ class EpisodeFamily:
 
     def _split_whitened(self, rows: NDArray[np.int64], whitened: Vec
                         ) -> tuple[NDArray[np.int64], Vec, Vec]:
-        """The arm rows (indices into ``keep``), their residual entries (14 each, first) and the
-        chamfer slides' entries (one each, after them)."""
+        """The arm rows (indices into ``keep``), their residual entries (one per arm channel each,
+        first: 14 with a commanded torque, 7 without) and the chamfer slides' entries (one each,
+        after them)."""
         arm, _ = self._parts(rows)
         w = np.asarray(whitened, float)
-        return arm, w[:14 * arm.size], w[14 * arm.size:]
+        k = len(self.inner.channels) * arm.size
+        return arm, w[:k], w[k:]
 
     def noise_ratio(self, rows: NDArray[np.int64], whitened: Vec) -> tuple[float, str] | None:
         """The arm channels' noise over the stated sigma, from sample-to-sample differences."""
         arm, w_arm, _ = self._split_whitened(rows, whitened)
-        r = consecutive_noise_ratio(self.keep[arm], w_arm, 14)
+        r = consecutive_noise_ratio(self.keep[arm], w_arm, len(self.inner.channels))
         return None if r is None else (r, "sample-to-sample differences of the arm channels")
 
     def residual_parts(self, rows: NDArray[np.int64], whitened: Vec) -> dict[str, Vec]:

@@ -199,3 +199,28 @@ def test_an_episode_without_the_wrench_estimate_still_diagnoses_the_arm(episodes
     family = family_from_recording(bare)
     assert family.slides is None and "no O_T_EE_z" in family.kind
     assert "contact_friction" not in {e.name for e in family.effects}
+
+
+def _without_the_command(rec):
+    drop = [c for c in rec.signals.column_names if c.startswith("tau_J_d")]
+    meta = dataclasses.replace(rec.meta, channels=tuple(c for c in rec.meta.channels if c not in drop),
+                               noise_sigma={k: v for k, v in rec.meta.noise_sigma.items() if k not in drop})
+    return dataclasses.replace(rec, meta=meta, signals=rec.signals.drop_columns(drop))
+
+
+def test_an_episode_without_the_commanded_torque_is_diagnosed_on_the_sensors(episodes) -> None:
+    """A recording without tau_J_d (a robot that logs no command): seven channels per arm row,
+    not fourteen, through the split, the fit and the noise test (this raised a reshape error);
+    the frictionless episode then establishes nothing on its torque sensors either."""
+    family = family_from_recording(_without_the_command(episodes["none"][0]))
+    assert len(family.inner.channels) == 7
+    d = diagnose(family, 0)
+    assert not [f for f in d.findings if f.established], d.verdict
+
+
+@pytest.mark.xfail(strict=True, reason="the torque sensors alone keep structure the nominal "
+                   "model does not explain: held-out RMS 1.22 x sigma (p 4e-12) on the "
+                   "frictionless episode, data noise 1.02 x; not found yet")
+def test_on_the_sensors_alone_the_frictionless_episode_leaves_noise(episodes) -> None:
+    d = diagnose(family_from_recording(_without_the_command(episodes["none"][0])), 0)
+    assert d.residual.passes, d.verdict
