@@ -29,7 +29,8 @@ from serpar.controllers.batch_laws import (
     laws_present,
     next_force_offset,
 )
-from serpar.controllers.batch_model import BatchNominalArm, dot
+from serpar.controllers.batch_linalg import dot
+from serpar.controllers.batch_model import BatchNominalArm
 from serpar.controllers.batch_sensors import BatchArmSensors, BatchMeasurement, Seed, trial_seeds
 from serpar.controllers.wrench import BatchWrenchEstimator
 from serpar.errors import ConfigError, LimitError

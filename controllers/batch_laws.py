@@ -27,7 +27,8 @@ from serpar.controllers.arm_laws import (
     ImpedanceGains,
     JointGains,
 )
-from serpar.controllers.batch_model import ArmTerms, Ids, dot, mat_vec
+from serpar.controllers.batch_linalg import dot, inverse_each, mat_vec
+from serpar.controllers.batch_model import ArmTerms, Ids
 from serpar.errors import ConfigError
 
 Arr = NDArray[np.float64]
@@ -221,7 +222,7 @@ def impedance_torque(terms: ArmTerms, target: BatchCartesianTarget, gains: Imped
         raise ConfigError("the Cartesian laws need terms loaded with Jdot dq (terms(jdot=True))")
     jac_t = jac.transpose(0, 2, 1)
     minv_jt = np.linalg.solve(terms.mass, jac_t)
-    lam = np.linalg.inv(np.matmul(jac, minv_jt))
+    lam = inverse_each(np.matmul(jac, minv_jt))
     # acc* - Jdot dq: the Cartesian acceleration the joint accelerations must add
     acc = target.acc - jdot_dq
     wrench = (mat_vec(lam, acc) + gains.stiffness_array * pose_error(terms, target)

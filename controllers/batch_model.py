@@ -33,6 +33,7 @@ import numpy as np
 from mujoco.batch import Batch
 from numpy.typing import NDArray
 
+from serpar.controllers.batch_linalg import dot, mat_vec
 from serpar.errors import ConfigError
 from serpar.sim.arm import N_JOINTS, build_arm_spec
 from serpar.sim.arm_drive import ArmIndex
@@ -63,18 +64,6 @@ def cross(a: Arr, b: Arr) -> Arr:
     """Row-wise a x b over (..., 3) in mju_cross's operation order (a1 b2 - a2 b1, ...)."""
     p = a.take(_CROSS_A, axis=-1) * b.take(_CROSS_B, axis=-1)
     return p[..., 0, :] - p[..., 1, :]
-
-
-def mat_vec(mat: Arr, vec: Arr) -> Arr:
-    """(..., m, n) @ (..., n) -> (..., m): np.matmul runs the BLAS gemv per trial that a single
-    ``mat @ vec`` runs, bitwise the same where each trial's matrix has the single one's memory
-    layout (C or Fortran order picks the kernel); np.einsum sums in another order."""
-    return np.matmul(mat, vec[..., None])[..., 0]
-
-
-def dot(a: Arr, b: Arr) -> Arr:
-    """Row-wise a . b over (..., n) by BLAS ddot, as a single ``a @ b`` on vectors."""
-    return np.matmul(a[..., None, :], b[..., :, None])[..., 0, 0]
 
 
 class ArmTerms(NamedTuple):

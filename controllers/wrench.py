@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from serpar.controllers.batch_model import ArmTerms, BatchNominalArm, mat_vec
+from serpar.controllers.batch_linalg import mat_vec
+from serpar.controllers.batch_model import ArmTerms, BatchNominalArm
 from serpar.errors import ConfigError
 from serpar.sim.arm import N_JOINTS
 

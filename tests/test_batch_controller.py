@@ -14,7 +14,7 @@ import pytest
 from controller_support import rotation
 from mujoco.batch import Batch
 
-from serpar.controllers import arm_laws, batch_laws
+from serpar.controllers import arm_laws, batch_laws, batch_linalg
 from serpar.controllers.arm_controller import (
     ArmController,
     ArmControllerConfig,
@@ -322,3 +322,21 @@ def test_batch_controller_rejects_bad_input() -> None:
         BatchArmController(2, 1e-4, seeds=trial_seeds(0, range(3)))
     with pytest.raises(ConfigError, match="whole number"):
         BatchArmController(2, 3e-4)
+
+
+def test_one_singular_operational_inertia_does_not_stop_the_batch() -> None:
+    """J M^-1 J^T of an arm at a singularity is singular: that world gets the pseudo-inverse, the
+    others exactly the inverse they get alone (a diverged world reset to qpos0 used to raise
+    LinAlgError over the whole batch)."""
+    rng = np.random.default_rng(0)
+    regular = rng.normal(size=(6, 6))
+    regular = regular @ regular.T + 6 * np.eye(6)
+    rank5 = rng.normal(size=(6, 5))
+    singular = rank5 @ rank5.T
+    singular[:, 5] = singular[:, 0]
+    singular[5, :] = singular[0, :]  # two equal rows: LU meets an exact zero pivot
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.inv(np.stack([regular, singular]))
+    out = batch_linalg.inverse_each(np.stack([regular, singular]))
+    assert np.array_equal(out[0], np.linalg.inv(regular))
+    assert np.allclose(out[1], np.linalg.pinv(singular))
