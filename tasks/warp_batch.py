@@ -166,7 +166,8 @@ class WarpBatch:
         self._buffers(nstep)
         self._ctrl_buf.assign(full.astype(np.float32))  # type: ignore[union-attr]
         self._upload()
-        start = (self.d.qpos.numpy().copy(), self.d.qvel.numpy().copy())
+        # the state just uploaded, from the host copies (no read back from the device)
+        start = (self.bind("qpos").astype(np.float32), self.bind("qvel").astype(np.float32))
         if self.device == "cuda":
             if nstep not in self._graphs:
                 with wp.ScopedCapture(device=self.device) as capture:  # type: ignore[attr-defined]
