@@ -168,7 +168,7 @@ class CellRuntime:
                 self._gate_tick = GATE_EVERY
                 self.gate.update(d)
             transit = self.transit
-            if transit is not None and transit.set(not self.gate.any_on() and transit.platform_still(d)):
+            if transit is not None and transit.set(not self.gate.any_on() and transit.platform_still(d), d):
                 self._match_step()
         if self._adc is None or len(self._adc.weights) != self.arm.substeps:
             self._adc = self._adcs.get(self.arm.substeps) or self._adcs.setdefault(
