@@ -1,16 +1,20 @@
-"""``serpar bench --montecarlo``: insertion trials per second, their scaling with threads, and
-the batched loop against bare ``mujoco.batch`` stepping of the same trial scenes (the floor)."""
+"""``serpar bench --montecarlo``: insertion trials per second, their scaling with threads, the
+batched loop against bare ``mujoco.batch`` stepping of the same trial scenes (the floor), and
+what building a trial's scene costs in place and built ahead in processes (checks/build_ahead.py:
+a GPU batch of thousands of worlds waits for all its scenes)."""
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from functools import partial
 
 import mujoco
 import mujoco.batch
 import numpy as np
 
-from serpar.checks.montecarlo import prepare, run_block, scene_config
+from serpar.checks.build_ahead import BuildAhead
+from serpar.checks.montecarlo import build_trial, prepare, run_block, scene_config
 from serpar.checks.montecarlo_config import MonteCarloConfig
 from serpar.sim.arm import HOME_Q
 from serpar.sim.trial_scene import TrialIds
@@ -42,6 +46,20 @@ def bare_rate(cfg: MonteCarloConfig, trials: int, seed: int, threads: int, steps
     return trials * steps / (time.perf_counter() - t0)
 
 
+def build_ms(cfg: MonteCarloConfig, trials: int, seed: int, workers: int) -> float:
+    """Wall ms per trial scene (drawn, compiled, its start planned) handed to the runner: in
+    place (``workers`` 1) or built ahead on ``workers`` processes, their start-up included."""
+    t0 = time.perf_counter()
+    if workers < 2:
+        for k in range(trials):
+            build_trial(cfg, seed, k)
+    else:
+        with BuildAhead(partial(build_trial, cfg, seed), 0, trials, workers) as ahead:
+            for k in range(trials):
+                ahead.get(k)
+    return 1e3 * (time.perf_counter() - t0) / trials
+
+
 def montecarlo_bench(trials: int = 32, threads: tuple[int, ...] = (1, 2), seed: int = 0,
                      tick: Callable[[str], None] = lambda name: None) -> dict[str, object]:
     """One batch of ``trials`` trials per thread count: trials/s, physics steps/s summed over
@@ -62,5 +80,8 @@ def montecarlo_bench(trials: int = 32, threads: tuple[int, ...] = (1, 2), seed: 
     rates = {k: v["trials_per_s"] for k, v in out["by_threads"].items()}  # type: ignore[union-attr]
     first = rates[str(threads[0])]
     out["scaling"] = {k: v / first for k, v in rates.items()}
+    workers = max(threads)
+    out["scene_build_ms"] = {str(w): build_ms(cfg, 4 * trials, seed, w) for w in sorted({1, workers})}
+    tick("montecarlo, scene builds")
     return out
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import mujoco
@@ -20,6 +21,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from serpar.checks.build_ahead import BuildAhead
 from serpar.checks.montecarlo_config import SOURCES, MonteCarloConfig, TrialSample, draw_trial
 from serpar.checks.tool_changer_robot import PAPER_POSITION_RELIABILITY
 from serpar.controllers.batch_sensors import trial_seeds
@@ -145,12 +147,15 @@ def _scene_and_start(cfg: MonteCarloConfig, d: TrialDraw, scene: TrialSceneConfi
 
 class _Trials(Sequence[Trial]):
     """Trials ``first..stop-1``, each drawn, built and placed when asked for (a slot taking it),
-    so that a run holds only its slots' models."""
+    so that a run holds only its slots' models; with ``ahead`` the next ones are already being
+    built in worker processes (checks/build_ahead.py)."""
 
     def __init__(self, cfg: MonteCarloConfig, seed: int, first: int, stop: int,
-                 scene: TrialSceneConfig | None = None) -> None:
+                 scene: TrialSceneConfig | None = None,
+                 ahead: BuildAhead[tuple[Trial, TrialSample]] | None = None) -> None:
         self.cfg, self.seed, self.first, self.stop = cfg, seed, first, stop
         self.scene = scene or scene_config(cfg)
+        self.ahead = ahead
         self.samples: dict[int, tuple[TrialSample, TrialStart]] = {}
 
     def __len__(self) -> int:
@@ -160,7 +165,8 @@ class _Trials(Sequence[Trial]):
         if isinstance(i, slice):
             return [self[j] for j in range(*i.indices(len(self)))]
         k = self.first + int(i)
-        trial, sample = _build(self.cfg, self.seed, k, self.scene)
+        trial, sample = (self.ahead.get(k) if self.ahead is not None
+                         else _build(self.cfg, self.seed, k, self.scene))
         self.samples[k] = (sample, trial.start)
         return trial
 
@@ -189,11 +195,24 @@ def build_trial(cfg: MonteCarloConfig, seed: int, k: int, scene: TrialSceneConfi
 def run_block(cfg: MonteCarloConfig, seed: int, first: int, stop: int, threads: int = 1,
               slots: int = BATCH, on_row: Callable[[TrialRow], None] | None = None,
               on_period: Callable[[int], None] | None = None, scene: TrialSceneConfig | None = None,
-              engine: Callable[[mujoco.MjModel, int], mujoco.batch.Batch] | None = None) -> list[TrialRow]:
+              engine: Callable[[mujoco.MjModel, int], mujoco.batch.Batch] | None = None,
+              build_workers: int = 1) -> list[TrialRow]:
     """Trials first..stop-1 in ``slots`` simulations at a time (a local run, or one Ray task);
-    ``on_row`` as each ends; ``scene``/``engine`` for another plant (``--gpu``)."""
+    ``on_row`` as each ends; ``scene``/``engine`` for another plant (``--gpu``);
+    ``build_workers`` > 1 builds the trials' scenes ahead in that many processes."""
     scene = scene or scene_config(cfg)
-    trials = _Trials(cfg, seed, first, stop, scene)
+    if build_workers > 1:
+        with BuildAhead(partial(_build, cfg, seed, scene=scene), first, stop, build_workers) as ahead:
+            return _run_block(cfg, seed, _Trials(cfg, seed, first, stop, scene, ahead), threads,
+                              slots, on_row, on_period, engine)
+    return _run_block(cfg, seed, _Trials(cfg, seed, first, stop, scene), threads, slots, on_row,
+                      on_period, engine)
+
+
+def _run_block(cfg: MonteCarloConfig, seed: int, trials: _Trials, threads: int, slots: int,
+               on_row: Callable[[TrialRow], None] | None, on_period: Callable[[int], None] | None,
+               engine: Callable[[mujoco.MjModel, int], mujoco.batch.Batch] | None) -> list[TrialRow]:
+    first, scene = trials.first, trials.scene
     rows: list[TrialRow] = []
 
     def done(i: int, r: TrialResult) -> None:
@@ -215,13 +234,14 @@ def run_montecarlo(cfg: MonteCarloConfig, trials: int, seed: int, threads: int =
                    batch: int = BATCH, on_rows: Callable[[list[TrialRow]], None] | None = None,
                    on_period: Callable[[int], None] | None = None,
                    ray_address: str | None = None, scene: TrialSceneConfig | None = None,
-                   engine: Callable[[mujoco.MjModel, int], mujoco.batch.Batch] | None = None
-                   ) -> MonteCarloResult:
+                   engine: Callable[[mujoco.MjModel, int], mujoco.batch.Batch] | None = None,
+                   build_workers: int = 1) -> MonteCarloResult:
     """``trials`` trials here, ``batch`` simulations at a time on ``threads`` threads, a trial
     starting as another ends; or as one Ray task per ``batch`` trials (``ray_address``).
     ``on_rows`` gets the rows as they finish. Ctrl-C keeps the trials that finished; a dead Ray
     task's trials are missing from the result, and the reason is in ``errors``. ``scene`` and
-    ``engine``: another plant for a local run (``--gpu``: MuJoCo Warp, the scene at the origin)."""
+    ``engine``: another plant for a local run (``--gpu``: MuJoCo Warp, the scene at the origin);
+    ``build_workers`` > 1: a local run's trial scenes built ahead in that many processes."""
     if engine is not None and ray_address is not None:
         raise ConfigError(GPU_OR_RAY)
     if trials < 1 or threads < 1 or batch < 1:
@@ -237,7 +257,7 @@ def run_montecarlo(cfg: MonteCarloConfig, trials: int, seed: int, threads: int =
     try:
         if ray_address is None:
             run_block(cfg, seed, 0, trials, threads, batch, lambda row: keep([row]), on_period,
-                      scene, engine)
+                      scene, engine, build_workers)
         else:
             blocks = [(first, min(first + batch, trials)) for first in range(0, trials, batch)]
             for rows in _ray_rows(cfg, seed, blocks, ray_address, result):

@@ -11,6 +11,7 @@ boundary trial, and its agreement is reported apart.
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Callable
 
 import mujoco
@@ -72,7 +73,9 @@ def run_gpu(cfg: MonteCarloConfig, trials: int, seed: int, batch: int, device: s
         engines.append(WarpBatch(reference, n, device))
         return engines[-1]
 
-    result = run_montecarlo(cfg, trials, seed, 1, batch, on_rows, scene=scene, engine=engine)  # type: ignore[arg-type]
+    # a batch of thousands of worlds waits for all its scenes: build them on every core
+    result = run_montecarlo(cfg, trials, seed, 1, batch, on_rows, scene=scene, engine=engine,  # type: ignore[arg-type]
+                            build_workers=os.cpu_count() or 1)
     limit = sum(e.iteration_limit for e in engines)
     total = sum(e.world_periods for e in engines)
     if total:

@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--montecarlo", action="store_true",
                    help="also time serpar montecarlo: one batch of 32 insertion trials at 1 thread "
                         "and at every core, trials/s, the scaling and the overhead over bare batched "
-                        "stepping (adds ~2 min)")
+                        "stepping, and a trial scene's build in place and in processes (adds ~2 min)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_bench)
     return p
@@ -34,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def cmd_bench(args: argparse.Namespace) -> int:
     cfg = BenchConfig(sim_seconds=args.seconds, repeats=args.repeats)
     threads = tuple(sorted({1, os.cpu_count() or 1}))
-    bar = progress(5 + 3 * args.episode + len(threads) * args.montecarlo, "bench",
+    bar = progress(5 + 3 * args.episode + (len(threads) + 1) * args.montecarlo, "bench",
                    enabled=sys.stderr.isatty())
 
     def tick(name: str) -> None:
@@ -82,6 +82,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
                     [[f"{n} thread(s)", f"{r['wall_s']:.1f}", f"{r['trials_per_s']:.2f}",
                       f"{r['steps_per_s']:,.0f}", f"{r['bare_steps_per_s']:,.0f}", f"{r['overhead']:.2f}x",
                       f"{mc['scaling'][n]:.2f}x"] for n, r in mc["by_threads"].items()]))
+        print(table(["trial scene built", "ms per trial"],
+                    [["in place" if w == "1" else f"ahead on {w} processes", f"{ms:.1f}"]
+                     for w, ms in mc["scene_build_ms"].items()]))
     goals = report["goals"]
     print(table(["figure", "measured", "goal", ""],
                 [[g["label"], f"{g['value']:.2f}", g["goal"], "met" if g["met"] else "SHORT"] for g in goals.values()]))

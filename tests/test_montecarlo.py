@@ -76,7 +76,9 @@ def test_inside_the_capture_radius_it_seats_beyond_it_it_does_not(offsets) -> No
 def test_results_do_not_depend_on_threads_or_batch_size() -> None:
     one = run_montecarlo(CFG, 4, seed=3, threads=1, batch=4)
     two = run_montecarlo(CFG, 4, seed=3, threads=2, batch=2)
+    ahead = run_montecarlo(CFG, 4, seed=3, threads=1, batch=4, build_workers=2)  # scenes built in processes
     assert [r.as_dict() for r in one.rows] == [r.as_dict() for r in two.rows]
+    assert [r.as_dict() for r in one.rows] == [r.as_dict() for r in ahead.rows]
     assert one.counts["success"] == 4  # the cell's own error budget: tens of um, all seat
 
 
