@@ -49,10 +49,12 @@ the cell's pads."""
 
 def gpu_scene(cfg: MonteCarloConfig) -> TrialSceneConfig:
     """The budget's trial scene with the world's origin at the hole (float32 resolves ~2 nm
-    there) and pads float32 can hold a part in (:data:`GPU_GRIP_TIMESTEPS`)."""
+    there), pads float32 can hold a part in (:data:`GPU_GRIP_TIMESTEPS`) and the seat as a
+    plane (``TrialSceneConfig.seat_plane``: MuJoCo Warp's float32 box-cylinder collision can
+    misfire with the shoulder on the seat)."""
     scene = scene_config(cfg)
     physics = dataclasses.replace(scene.physics, grip_timesteps=GPU_GRIP_TIMESTEPS)
-    return dataclasses.replace(scene, at_origin=True, physics=physics)
+    return dataclasses.replace(scene, at_origin=True, physics=physics, seat_plane=True)
 
 
 def reference_model(scene: TrialSceneConfig) -> mujoco.MjModel:

@@ -67,6 +67,12 @@ class TrialSceneConfig:
     """Put the world origin at the hole's entry (the arm's base at -entry): a float32 engine
     (MuJoCo Warp) resolves ~2 nm there against ~60 nm at the entry's 0.6 m from the base. The
     physics is the same; only where the world's origin sits moves."""
+    seat_plane: bool = False
+    """The seat (the plate's top face, where the part's shoulder lands) as a plane at that face
+    instead of the cell's box. Only the part's body touches it, so the box's extent never
+    matters; but MuJoCo Warp's float32 box-cylinder collision, with the shoulder resting on the
+    face, now and then returns the box's side as the separating axis (a 32 mm deep contact
+    along -y: a seated trial blew up); plane-cylinder is analytic (docs/montecarlo.md)."""
 
     @property
     def base(self) -> tuple[float, float, float]:
@@ -83,6 +89,22 @@ class TrialSceneConfig:
     @property
     def plate(self) -> BaseplateConfig:
         return BaseplateConfig(rows=1, cols=1, margin=PATCH.margin, chamfer=self.chamfer)
+
+
+def _seat_as_plane(spec: mujoco.MjSpec, top: float, part_geom: str) -> None:
+    """The seat box as a plane at its top face, touching the part's body only, through an
+    explicit pair with the contact the box's collision bits gave (both geoms carry the same
+    precision-contact settings at equal priority, so MuJoCo's mix is the seat's own): an
+    infinite plane on the bits would also meet the arm's links below the plate."""
+    seat = spec.geom(names.PLATE + "seat")
+    seat.type, seat.pos = mujoco.mjtGeom.mjGEOM_PLANE, [0.0, 0.0, top]
+    seat.size = [seat.size[0], seat.size[1], 1e-3]  # a plane's size: drawn extent, grid
+    seat.contype = seat.conaffinity = 0
+    mu, spin, roll = seat.friction
+    spec.add_pair(name=f"{names.PLATE}seat|{part_geom}", geomname1=names.PLATE + "seat",
+                  geomname2=part_geom, condim=seat.condim, friction=[mu, mu, spin, roll, roll],
+                  solref=list(seat.solref), solimp=list(seat.solimp), margin=seat.margin,
+                  gap=seat.gap)
 
 
 def _check(name: str, value: float, band: object) -> None:
@@ -106,6 +128,8 @@ def build_trial_spec(cfg: TrialSceneConfig, hole: float, journal: float,
     spec.attach(build_baseplate_spec([hole], plate, cfg.physics), prefix=names.PLATE,
                 frame=spec.worldbody.add_frame(pos=[ex, ey, ez - plate.thickness]))
     spec.body(PLATE_BODY).mocap = True  # the platform's part: moved, never pushed
+    if cfg.seat_plane:
+        _seat_as_plane(spec, plate.thickness, f"{names.conductor(PART)}body")
     part = build_conductor_spec(journal, body, cfg.conductor, cfg.physics)
     spec.attach(part, prefix=names.conductor(PART),
                 frame=spec.worldbody.add_frame(pos=[ex, ey, ez + 0.01]))
