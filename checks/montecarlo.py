@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -153,9 +154,10 @@ class _Trials(Sequence[Trial]):
     def __init__(self, cfg: MonteCarloConfig, seed: int, first: int, stop: int,
                  scene: TrialSceneConfig | None = None,
                  ahead: BuildAhead[tuple[Trial, TrialSample]] | None = None) -> None:
-        self.cfg, self.seed, self.first, self.stop = cfg, seed, first, stop
+        self.first, self.stop = first, stop
         self.scene = scene or scene_config(cfg)
-        self.ahead = ahead
+        self._build: Callable[[int], tuple[Trial, TrialSample]] = (
+            ahead.get if ahead is not None else partial(_build, cfg, seed, scene=self.scene))
         self.samples: dict[int, tuple[TrialSample, TrialStart]] = {}
 
     def __len__(self) -> int:
@@ -165,8 +167,7 @@ class _Trials(Sequence[Trial]):
         if isinstance(i, slice):
             return [self[j] for j in range(*i.indices(len(self)))]
         k = self.first + int(i)
-        trial, sample = (self.ahead.get(k) if self.ahead is not None
-                         else _build(self.cfg, self.seed, k, self.scene))
+        trial, sample = self._build(k)
         self.samples[k] = (sample, trial.start)
         return trial
 
@@ -201,28 +202,21 @@ def run_block(cfg: MonteCarloConfig, seed: int, first: int, stop: int, threads: 
     ``on_row`` as each ends; ``scene``/``engine`` for another plant (``--gpu``);
     ``build_workers`` > 1 builds the trials' scenes ahead in that many processes."""
     scene = scene or scene_config(cfg)
-    if build_workers > 1:
-        with BuildAhead(partial(_build, cfg, seed, scene=scene), first, stop, build_workers) as ahead:
-            return _run_block(cfg, seed, _Trials(cfg, seed, first, stop, scene, ahead), threads,
-                              slots, on_row, on_period, engine)
-    return _run_block(cfg, seed, _Trials(cfg, seed, first, stop, scene), threads, slots, on_row,
-                      on_period, engine)
-
-
-def _run_block(cfg: MonteCarloConfig, seed: int, trials: _Trials, threads: int, slots: int,
-               on_row: Callable[[TrialRow], None] | None, on_period: Callable[[int], None] | None,
-               engine: Callable[[mujoco.MjModel, int], mujoco.batch.Batch] | None) -> list[TrialRow]:
-    first, scene = trials.first, trials.scene
     rows: list[TrialRow] = []
+    ahead = (BuildAhead(partial(_build, cfg, seed, scene=scene), first, stop, build_workers)
+             if build_workers > 1 else None)
+    with ahead or nullcontext():
+        trials = _Trials(cfg, seed, first, stop, scene, ahead)
 
-    def done(i: int, r: TrialResult) -> None:
-        k = first + i
-        sample, start = trials.samples.pop(k)
-        rows.append(TrialRow(k, sample, _tip_off_axis(start, scene) * 1e3, r))
-        if on_row is not None:
-            on_row(rows[-1])
+        def done(i: int, r: TrialResult) -> None:
+            k = first + i
+            sample, start = trials.samples.pop(k)
+            rows.append(TrialRow(k, sample, _tip_off_axis(start, scene) * 1e3, r))
+            if on_row is not None:
+                on_row(rows[-1])
 
-    run_trials(trials, scene.chamfer, trial_config(cfg), threads, on_period, slots, done, engine=engine)
+        run_trials(trials, scene.chamfer, trial_config(cfg), threads, on_period, slots, done,
+                   engine=engine)
     return sorted(rows, key=lambda r: r.trial)
 
 
