@@ -1,9 +1,9 @@
 """Trial scenes built ahead in worker processes.
 
-A trial's scene costs ~20 ms to build here (its spec and compile ~4 ms, the start's inverse
+A trial's scene costs ~17 ms to build here (its spec and compile ~4 ms, the start's inverse
 kinematics ~14 ms), one at a time on the Python thread that runs the batch. On CPU cores that
 hides behind the physics of the trials already running; a GPU batch of 10 000 worlds waits
-for all of them before its first step (~4 min on one core). :class:`BuildAhead` keeps up to
+for all of them before its first step (~3 min on one core). :class:`BuildAhead` keeps up to
 ``window`` builds in flight on ``workers`` processes (spawned: a forked child of a process
 holding a CUDA context or MuJoCo's thread pool is not safe) and hands results back in order;
 a model comes back pickled (~100 kB) and is bit-identical to one built here.
