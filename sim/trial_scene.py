@@ -73,6 +73,14 @@ class TrialSceneConfig:
     matters; but MuJoCo Warp's float32 box-cylinder collision, with the shoulder resting on the
     face, now and then returns the box's side as the separating axis (a 32 mm deep contact
     along -y: a seated trial blew up); plane-cylinder is analytic (docs/montecarlo.md)."""
+    rounding: tuple[float, float] = (0.0, 0.0)
+    """Round the edges of the part's journal and body cylinders by these radii [m]: each
+    cylinder shrunk by its radius (radius and both ends) with that contact margin (also on
+    its explicit pairs), which MuJoCo's collision adds back around the shrunk shape, so
+    every contact is active from the original surface on and only the edges round off. The
+    collision of such a pair starts as a distance query between separated shapes, which
+    float32 resolves where a shallow overlap of a cylinder's side along a face does not.
+    (0, 0): the sharp cylinders."""
 
     @property
     def base(self) -> tuple[float, float, float]:
@@ -83,6 +91,8 @@ class TrialSceneConfig:
         if len(self.entry) != 3 or not all(np.isfinite(self.entry)):
             raise ConfigError(f"entry {self.entry}: three finite coordinates [m]")
         BaseplateConfig(rows=1, cols=1, margin=PATCH.margin, chamfer=self.chamfer)  # validates it
+        if len(self.rounding) != 2 or not all(0 <= r < 1e-3 for r in self.rounding):
+            raise ConfigError(f"rounding {self.rounding}: two edge radii [m] (journal, body) in [0, 1e-3)")
         if self.arm_joint_friction and len(self.arm_joint_friction) != len(JOINT_NAMES):
             raise ConfigError(f"arm_joint_friction: () or {len(JOINT_NAMES)} values [N m]")
 
@@ -105,6 +115,29 @@ def _seat_as_plane(spec: mujoco.MjSpec, top: float, part_geom: str) -> None:
                   geomname2=part_geom, condim=seat.condim, friction=[mu, mu, spin, roll, roll],
                   solref=list(seat.solref), solimp=list(seat.solimp), margin=seat.margin,
                   gap=seat.gap)
+
+
+def _fix_inertial(part: mujoco.MjSpec) -> None:
+    """Write the part's body inertial as compiled from its geoms, so that shrinking them
+    (``_round_cylinder``) moves no mass."""
+    model = part.compile()
+    body, compiled = part.body("conductor"), model.body("conductor")
+    body.explicitinertial = True
+    body.mass, body.ipos = float(compiled.mass[0]), compiled.ipos.copy()
+    body.iquat, body.inertia = compiled.iquat.copy(), compiled.inertia.copy()
+
+
+def _round_cylinder(spec: mujoco.MjSpec, name: str, radius: float) -> None:
+    """Cylinder geom ``name`` shrunk by ``radius`` with that margin (TrialSceneConfig.rounding)."""
+    geom = spec.geom(name)
+    r, half = geom.size[0], geom.size[1]
+    if not 0 < radius < min(r, half):
+        raise ConfigError(f"rounding {radius} m of {name}: must be in (0, {min(r, half)})")
+    geom.size = [r - radius, half - radius, 0.0]
+    geom.margin = radius
+    for pair in spec.pairs:
+        if name in (pair.geomname1, pair.geomname2):
+            pair.margin += radius
 
 
 def _check(name: str, value: float, band: object) -> None:
@@ -131,10 +164,15 @@ def build_trial_spec(cfg: TrialSceneConfig, hole: float, journal: float,
     if cfg.seat_plane:
         _seat_as_plane(spec, plate.thickness, f"{names.conductor(PART)}body")
     part = build_conductor_spec(journal, body, cfg.conductor, cfg.physics)
+    if any(cfg.rounding):
+        _fix_inertial(part)  # the sharp part's mass, centre and inertia, whatever the rounding
     spec.attach(part, prefix=names.conductor(PART),
                 frame=spec.worldbody.add_frame(pos=[ex, ey, ez + 0.01]))
     add_pad_pairs(spec, [names.ARM + pad for pad in PAD_GEOMS], f"{names.conductor(PART)}body",
                   cfg.physics)
+    for geom, radius in zip(("journal", "body"), cfg.rounding):
+        if radius:
+            _round_cylinder(spec, f"{names.conductor(PART)}{geom}", radius)
     add_plate_contact_sensor(spec, names.conductor_body(PART), PLATE_BODY)
     return spec
 

@@ -15,9 +15,9 @@ inertia and what the compiler derives from them). Meshes are shared (the engine'
 the bore facets are moved radially so that each world's inner faces sit at its hole's
 radius (within 0.1 um), and the journal tip is the thinnest journal's.
 
-MuJoCo Warp is float32: use a scene ``at_origin`` (sim/trial_scene.py). Experimental: on
-warp's CPU device the float32 grasp lets the part sink 5-37 um into a pad now and then, and
-trials blow up once the journal meets the bore (docs/montecarlo.md, "On a GPU").
+MuJoCo Warp is float32: run the GPU's trial scene (checks/montecarlo_gpu.py ``gpu_scene``:
+the origin at the hole, softer pads, the seat a plane, the part's edges rounded), each change
+for a float32 failure traced in docs/montecarlo.md ("On a GPU").
 """
 
 from __future__ import annotations
