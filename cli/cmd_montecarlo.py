@@ -62,7 +62,7 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="one Ray task per batch on a cluster: local, auto or ray://HOST:PORT "
                         "(cluster extra); results equal a local run's")
     p.add_argument("--gpu", action="store_true",
-                   help="experimental, not yet agreeing with the CPU (docs/montecarlo.md): run the "
+                   help="experimental, its agreement not yet measured on a GPU (docs/montecarlo.md): run the "
                         "trials on MuJoCo Warp on this machine's CUDA GPU (float32, the scene at the "
                         "origin; the gpu extra: pip install 'serpar[gpu]'), then re-run a random sample "
                         "in float64 on the CPU cores and report the agreement")
