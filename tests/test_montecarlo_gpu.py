@@ -123,8 +123,8 @@ def test_a_diverged_world_is_put_back_at_its_start_and_the_others_step_on() -> N
 
 def test_the_gpu_scene_changes_no_float64_outcome() -> None:
     """The GPU scene (origin at the hole, GPU_GRIP_TIMESTEPS pads, the seat a plane, the part's
-    edges rounded) against
-    the cell's, both in float64 on the CPU cores: the same outcomes, peak forces within 3 %."""
+    edges rounded) against the cell's, both in float64 on the CPU cores: the same outcomes,
+    peak forces within 3 %."""
     from serpar.checks.montecarlo_gpu import GPU_GRIP_TIMESTEPS, GPU_ROUNDING, gpu_scene
     scene, gpu = scene_config(CFG), gpu_scene(CFG)
     assert gpu.seat_plane and gpu.at_origin and gpu.physics.grip_timesteps == GPU_GRIP_TIMESTEPS
