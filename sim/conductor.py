@@ -34,8 +34,14 @@ class ConductorConfig:
     density: float = 8500.0
     """Brass [kg/m^3]."""
     tip_facets: int = 48
+    tip_inset: float = 0.0
+    """How far inside the journal's radius the tip frustum's top ring lies [m]. At 0 its
+    vertices lie on the journal cylinder's bottom edge, so where the edge meets the bore the
+    tip can touch at the same place (docs/montecarlo.md, "The float64 jams on warp")."""
 
     def __post_init__(self) -> None:
+        if not 0 <= self.tip_inset < self.tip_chamfer:
+            raise ConfigError(f"tip_inset {self.tip_inset} m must be in [0, tip_chamfer={self.tip_chamfer})")
         if not 0 < self.tip_chamfer < self.journal_length / 2:
             raise ConfigError(f"tip_chamfer {self.tip_chamfer} m must be in (0, journal_length/2)")
         if self.body_length <= 0 or self.journal_length <= 0:
@@ -77,7 +83,8 @@ def add_conductor_geoms(
     r, c, lj, lb = journal_diameter / 2, config.tip_chamfer, config.journal_length, config.body_length
     spec.add_mesh(
         name=mesh_name,
-        uservert=_frustum_vertices(r, r - c, -lj + c, -lj, config.tip_facets).ravel().tolist(),
+        uservert=_frustum_vertices(r - config.tip_inset, r - c - config.tip_inset, -lj + c, -lj,
+                                   config.tip_facets).ravel().tolist(),
     )
     geoms = [
         body.add_geom(name="body", type=mujoco.mjtGeom.mjGEOM_CYLINDER,

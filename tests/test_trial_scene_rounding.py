@@ -1,5 +1,6 @@
 """The GPU scene's rounded part (``TrialSceneConfig.rounding``): the same contacts as the sharp
-part's where a face meets a cylinder's side, the same mass, the margin on the explicit pairs."""
+part's where a face meets a cylinder's side, the same mass, the margin on the explicit pairs;
+and the tip's ring inset (``ConductorConfig.tip_inset``)."""
 
 from __future__ import annotations
 
@@ -68,3 +69,19 @@ def test_a_rounding_that_is_not_two_radii_is_refused() -> None:
         TrialSceneConfig(rounding=(1e-6,))  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="two edge radii"):
         TrialSceneConfig(rounding=(-1e-6, 0.0))
+
+
+def test_the_tip_inset_puts_the_tips_ring_inside_the_journal() -> None:
+    from serpar.sim.conductor import ConductorConfig
+    for inset in (0.0, 1e-7):
+        cfg = dataclasses.replace(SHARP, conductor=ConductorConfig(tip_inset=inset))
+        model = build_trial_spec(cfg, HOLE, JOURNAL).compile()
+        tip = model.geom(f"{names.conductor(PART)}tip")
+        k = tip.dataid[0]
+        verts = model.mesh_vert[model.mesh_vertadr[k]:model.mesh_vertadr[k] + model.mesh_vertnum[k]]
+        rot = np.zeros(9)
+        mujoco.mju_quat2Mat(rot, tip.quat)
+        local = verts @ rot.reshape(3, 3).T + tip.pos
+        assert np.hypot(local[:, 0], local[:, 1]).max() == pytest.approx(JOURNAL / 2 - inset, abs=1e-10)
+    with pytest.raises(ConfigError, match="tip_inset"):
+        ConductorConfig(tip_inset=-1e-7)
