@@ -170,7 +170,7 @@ def build_trial_spec(cfg: TrialSceneConfig, hole: float, journal: float,
                 frame=spec.worldbody.add_frame(pos=[ex, ey, ez + 0.01]))
     add_pad_pairs(spec, [names.ARM + pad for pad in PAD_GEOMS], f"{names.conductor(PART)}body",
                   cfg.physics)
-    for geom, radius in zip(("journal", "body"), cfg.rounding):
+    for geom, radius in zip(("journal", "body"), cfg.rounding):  # after the pairs: it sets theirs
         if radius:
             _round_cylinder(spec, f"{names.conductor(PART)}{geom}", radius)
     add_plate_contact_sensor(spec, names.conductor_body(PART), PLATE_BODY)

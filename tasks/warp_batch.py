@@ -231,7 +231,7 @@ class WarpBatch:
         return ""
 
 
-def _mesh_vertices(model: mujoco.MjModel, g: int) -> NDArray[np.float64]:
+def mesh_vertices(model: mujoco.MjModel, g: int) -> NDArray[np.float64]:
     """Geom ``g``'s mesh vertices in its body's frame."""
     k = model.geom_dataid[g]
     v = model.mesh_vert[model.mesh_vertadr[k]:model.mesh_vertadr[k] + model.mesh_vertnum[k]]
@@ -255,6 +255,6 @@ def _mesh_geom_poses(shared: mujoco.MjModel, own: mujoco.MjModel) -> dict[str, N
         radius = float(np.hypot(*centre))
         if radius < 1e-9:  # on its body's axis: the journal tip
             continue
-        inner = [float(np.min(np.hypot(*_mesh_vertices(m, g)[:, :2].T))) for m in (own, shared)]
+        inner = [float(np.min(np.hypot(*mesh_vertices(m, g)[:, :2].T))) for m in (own, shared)]
         pos[g, :2] = centre + (inner[0] - inner[1]) * centre / radius
     return {"geom_pos": pos, "geom_quat": quat}

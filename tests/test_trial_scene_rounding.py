@@ -14,6 +14,7 @@ from serpar.errors import ConfigError
 from serpar.sim import names
 from serpar.sim.tolerances import HOLE_H7, JOURNAL_H6
 from serpar.sim.trial_scene import PART, TrialSceneConfig, build_trial_spec
+from serpar.tasks.warp_batch import mesh_vertices
 
 SHARP = TrialSceneConfig(at_origin=True, seat_plane=True)
 ROUNDED = dataclasses.replace(SHARP, rounding=(1e-6, 50e-6))
@@ -76,12 +77,7 @@ def test_the_tip_inset_puts_the_tips_ring_inside_the_journal() -> None:
     for inset in (0.0, 1e-7):
         cfg = dataclasses.replace(SHARP, conductor=ConductorConfig(tip_inset=inset))
         model = build_trial_spec(cfg, HOLE, JOURNAL).compile()
-        tip = model.geom(f"{names.conductor(PART)}tip")
-        k = tip.dataid[0]
-        verts = model.mesh_vert[model.mesh_vertadr[k]:model.mesh_vertadr[k] + model.mesh_vertnum[k]]
-        rot = np.zeros(9)
-        mujoco.mju_quat2Mat(rot, tip.quat)
-        local = verts @ rot.reshape(3, 3).T + tip.pos
+        local = mesh_vertices(model, model.geom(f"{names.conductor(PART)}tip").id)
         assert np.hypot(local[:, 0], local[:, 1]).max() == pytest.approx(JOURNAL / 2 - inset, abs=1e-10)
     with pytest.raises(ConfigError, match="tip_inset"):
         ConductorConfig(tip_inset=-1e-7)
