@@ -128,7 +128,7 @@ def _collides(scene: Scene) -> bool:
     moving = {b for b in range(m.nbody) if b == board or (m.body(b).name.startswith(names.ARM) and b != base)}
     for c in d.contact[: d.ncon]:
         b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
-        if (b1 in moving) != (b2 in moving) and c.dist < 0:
+        if (b1 in moving) != (b2 in moving) and c.dist < c.includemargin:  # margin: a shrunk geom
             return True
     return False
 

@@ -47,16 +47,17 @@ forces within 0.1 % (1-99 %), at most 2.1 % (docs/montecarlo.md). The float64 ch
 the cell's pads."""
 
 
-GPU_ROUNDING = (1e-6, 50e-6)
-"""Edge radii [m] of the part's journal and body on the GPU (``TrialSceneConfig.rounding``).
+GPU_ROUNDING = (0.0, 50e-6)
+"""Edge radii [m] added to the part's journal and body on the GPU (``TrialSceneConfig.rounding``).
 Where a cylinder's side lies almost flat on a face (a seated journal on a bore facet, the
 part's body between the pads) and overlaps it a little, MuJoCo Warp's float32 collision now
 and then reports the pair separated: over one trial's substeps, 594 of the 4 538
 journal-facet pairs CPU MuJoCo finds (to 0.95 um deep), and once a pad's 7 um deep contact,
 whose force, gone for a step, kicked the seated part (overforce at 22-38 N in 4 of 32 trials
-on warp's CPU device; with the edges rounded, 24 and none). Rounded, such a contact starts as a distance query between
-the shrunk, separated shapes, which float32 resolves. Each radius exceeds the contact's
-usual depth: ~1 um at the journal, up to ~17 um at the softer GPU pads."""
+on warp's CPU device; with the edges rounded, 24 and none). Rounded, such a contact starts as
+a distance query between the shrunk, separated shapes, which float32 resolves. The journal's
+own edge round (``ConductorConfig.edge_radius``, 10 um) already does that at the journal; the
+body's 50 um exceeds the contact's depth at the softer GPU pads (up to ~17 um)."""
 
 
 def gpu_scene(cfg: MonteCarloConfig) -> TrialSceneConfig:

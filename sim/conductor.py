@@ -3,8 +3,14 @@
 Frame: origin at the shoulder (where the journal meets the body), z along the
 body, the journal points to -z. The journal is a cylinder primitive (exact
 analytic contact with the bore boxes) plus a convex frustum mesh for the tip
-chamfer; the frustum's vertices lie on the journal radius, so its facets never
-stick out of the cylinder.
+chamfer. The edge between them is a fillet (`edge_radius`): the cylinder is
+shrunk by the radius and given it as contact margin, so MuJoCo's contact surface
+is the sharp cylinder with its edges rounded, and the frustum's 45 deg face is
+tangent to that round. A sharp edge there was an artifact either way: with the
+frustum's ring on the cylinder's edge both geoms touch the bore at the same
+place (a tight fit's jam hinged on it), and with the ring set inside, the
+cylinder's flat bottom shows as a ledge that sits on the plate's chamfer corner
+(docs/montecarlo.md, "The journal's edge").
 """
 
 from __future__ import annotations
@@ -34,14 +40,15 @@ class ConductorConfig:
     density: float = 8500.0
     """Brass [kg/m^3]."""
     tip_facets: int = 48
-    tip_inset: float = 0.0
-    """How far inside the journal's radius the tip frustum's top ring lies [m]. At 0 its
-    vertices lie on the journal cylinder's bottom edge, so where the edge meets the bore the
-    tip can touch at the same place (docs/montecarlo.md, "The float64 jams on warp")."""
+    edge_radius: float = 10e-6
+    """Fillet between the journal's side and its tip chamfer [m] (0: a sharp edge, the ring
+    flush on the cylinder's edge). Above the 48-gon's 1.8 um sagitta so that the chamfer's
+    flat facets never leave the round's flat bottom exposed."""
 
     def __post_init__(self) -> None:
-        if not 0 <= self.tip_inset < self.tip_chamfer:
-            raise ConfigError(f"tip_inset {self.tip_inset} m must be in [0, tip_chamfer={self.tip_chamfer})")
+        if not 0 <= self.edge_radius <= self.tip_chamfer / 4:
+            raise ConfigError(f"edge_radius {self.edge_radius} m must be in [0, tip_chamfer/4="
+                              f"{self.tip_chamfer / 4}]")
         if not 0 < self.tip_chamfer < self.journal_length / 2:
             raise ConfigError(f"tip_chamfer {self.tip_chamfer} m must be in (0, journal_length/2)")
         if self.body_length <= 0 or self.journal_length <= 0:
@@ -67,6 +74,24 @@ def _frustum_vertices(r_top: float, r_bottom: float, z_top: float, z_bottom: flo
     return np.r_[top, bot]
 
 
+def tip_frustum(r: float, config: ConductorConfig) -> tuple[float, float, float, float]:
+    """(top radius, bottom radius, top z, bottom z) [m] of the tip chamfer's frustum on a journal
+    of radius ``r``: its 45 deg face on the line tangent to the edge's round (centre
+    (r - rho, z_edge + rho) in the section) set 1 % of rho outside it, so the round never
+    touches a 45 deg face together with the chamfer, and its top ring at the tangent height,
+    where it meets the round with a step of 0.014 rho."""
+    rho, c, lj = config.edge_radius, config.tip_chamfer, config.journal_length
+    z_edge = -lj + c
+    out = np.sqrt(2) * 0.01 * rho  # the face's offset from the tangent line, horizontally
+    return (r - (1 - np.sqrt(0.5)) * rho + out, r - c - (2 - np.sqrt(2)) * rho + out,
+            z_edge + (1 - np.sqrt(0.5)) * rho, -lj)
+
+
+def _polygon_frustum_volume(r_top: float, r_bottom: float, height: float, n: int) -> float:
+    area = [n / 2 * rr**2 * np.sin(2 * np.pi / n) for rr in (r_top, r_bottom)]
+    return float(height / 3 * (area[0] + area[1] + np.sqrt(area[0] * area[1])))
+
+
 def add_conductor_geoms(
     spec: mujoco.MjSpec,
     body: mujoco.MjsBody,
@@ -81,22 +106,24 @@ def add_conductor_geoms(
         if not band.min - 1e-12 <= d <= band.max + 1e-12:
             raise ConfigError(f"{name} diameter {d} m outside its h6 band {band.min}..{band.max}")
     r, c, lj, lb = journal_diameter / 2, config.tip_chamfer, config.journal_length, config.body_length
-    spec.add_mesh(
-        name=mesh_name,
-        uservert=_frustum_vertices(r - config.tip_inset, r - c - config.tip_inset, -lj + c, -lj,
-                                   config.tip_facets).ravel().tolist(),
-    )
+    rho = config.edge_radius
+    spec.add_mesh(name=mesh_name,
+                  uservert=_frustum_vertices(*tip_frustum(r, config), config.tip_facets).ravel().tolist())
     geoms = [
         body.add_geom(name="body", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                       size=[body_diameter / 2, lb / 2, 0], pos=[0, 0, lb / 2], rgba=list(CONDUCTOR_RGBA)),
-        body.add_geom(name="journal", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                      size=[r, (lj - c) / 2, 0], pos=[0, 0, -(lj - c) / 2], rgba=list(JOURNAL_RGBA)),
+        body.add_geom(name="journal", type=mujoco.mjtGeom.mjGEOM_CYLINDER,  # shrunk: the round
+                      size=[r - rho, (lj - c) / 2 - rho, 0], pos=[0, 0, -(lj - c) / 2],
+                      margin=rho, rgba=list(JOURNAL_RGBA)),
         body.add_geom(name="tip", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mesh_name,
                       rgba=list(JOURNAL_RGBA)),
     ]
     for geom in geoms:
         geom.density = config.density
         physics.precision_contact(geom)
+    # the sharp part's masses: the round and the tangent chamfer change the volumes by ~1 %
+    geoms[1].mass = config.density * np.pi * r**2 * (lj - c)
+    geoms[2].mass = config.density * _polygon_frustum_volume(r, r - c, c, config.tip_facets)
     collision.conductor_body(geoms[0])
     body.add_site(name="tip", pos=[0, 0, -lj], size=[1e-4, 0, 0], group=5)
     body.add_site(name="shoulder", pos=[0, 0, 0], size=[1e-4, 0, 0], group=5)

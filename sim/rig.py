@@ -75,13 +75,15 @@ class Rig:
         return self.hole_top_z - float(self.data.site_xpos[self.tip_site][2])
 
     def max_penetration(self) -> float:
-        """Deepest penetration [m] among the conductor's contacts (0 when none)."""
+        """Deepest penetration [m] among the conductor's contacts (0 when none), measured from the
+        contact surface: a geom with a margin (the journal's edge round) is shrunk by it, so its
+        contact's ``dist`` counts from the shrunk shape and the surface is ``includemargin`` out."""
         con = self.data.contact
         n = self.data.ncon
         worst = 0.0
         for i in range(n):
             if con.geom1[i] in self.conductor_geoms or con.geom2[i] in self.conductor_geoms:
-                worst = max(worst, -float(con.dist[i]))
+                worst = max(worst, float(con.includemargin[i] - con.dist[i]))
         return worst
 
     def contact_force(self) -> np.ndarray:

@@ -128,13 +128,15 @@ def _fix_inertial(part: mujoco.MjSpec) -> None:
 
 
 def _round_cylinder(spec: mujoco.MjSpec, name: str, radius: float) -> None:
-    """Cylinder geom ``name`` shrunk by ``radius`` with that margin (TrialSceneConfig.rounding)."""
+    """Cylinder geom ``name`` shrunk by ``radius`` more, its margin grown by as much
+    (TrialSceneConfig.rounding; the journal's edge round, ConductorConfig.edge_radius, adds to
+    it: the contact surface stays the sharp cylinder's sides and ends)."""
     geom = spec.geom(name)
     r, half = geom.size[0], geom.size[1]
     if not 0 < radius < min(r, half):
         raise ConfigError(f"rounding {radius} m of {name}: must be in (0, {min(r, half)})")
     geom.size = [r - radius, half - radius, 0.0]
-    geom.margin = radius
+    geom.margin += radius
     for pair in spec.pairs:
         if name in (pair.geomname1, pair.geomname2):
             pair.margin += radius

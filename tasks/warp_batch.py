@@ -246,14 +246,17 @@ def _mesh_geom_poses(shared: mujoco.MjModel, own: mujoco.MjModel) -> dict[str, N
     A bore facet's mesh is the wall between the hole and the plate's window, so its centroid
     moves by half the hole's radius change while its inner face moves by all of it: the shared
     facet is moved radially by the change of the inner face's radius (own's against shared's,
-    measured on the meshes), which puts the inner face where own's is. The journal tip keeps the
-    shared pose: its mesh is the thinnest journal's (checks/montecarlo_gpu.py ``reference_model``), so it is never
-    proud of a world's journal cylinder."""
+    measured on the meshes), which puts the inner face where own's is. The journal tip's mesh is
+    the thinnest journal's (checks/montecarlo_gpu.py ``reference_model``): moved along the
+    journal's axis (-z) by the radius change, its 45 deg chamfer lies on own's, tangent to own's
+    edge round (sim/conductor.py), its end up to 3 um below own's."""
     pos, quat = shared.geom_pos.copy(), shared.geom_quat.copy()
     for g in np.flatnonzero(shared.geom_type == mujoco.mjtGeom.mjGEOM_MESH):
         centre = shared.geom_pos[g, :2]
         radius = float(np.hypot(*centre))
         if radius < 1e-9:  # on its body's axis: the journal tip
+            ring = [float(np.max(np.hypot(*mesh_vertices(m, g)[:, :2].T))) for m in (own, shared)]
+            pos[g, 2] -= ring[0] - ring[1]
             continue
         inner = [float(np.min(np.hypot(*mesh_vertices(m, g)[:, :2].T))) for m in (own, shared)]
         pos[g, :2] = centre + (inner[0] - inner[1]) * centre / radius

@@ -22,7 +22,8 @@ def _free_travel(rig, theta: float) -> float:
     def gap(e: float) -> float:
         d.qpos[:3] = (e * math.cos(theta), e * math.sin(theta), -1.0e-3)  # 1 mm deep in the bore
         mujoco.mj_kinematics(m, d)
-        return min(mujoco.mj_geomDistance(m, d, journal, g, 1e-3, fromto) for g in walls)
+        # the journal's cylinder is shrunk by its edge round and carries it as margin
+        return min(mujoco.mj_geomDistance(m, d, journal, g, 1e-3, fromto) for g in walls) - m.geom_margin[journal]
 
     lo, hi = 0.0, 20e-6
     assert gap(lo) > 0 > gap(hi)
