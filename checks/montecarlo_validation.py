@@ -19,6 +19,7 @@ from serpar.checks.montecarlo import scene_config, trial_config
 from serpar.checks.montecarlo_config import MonteCarloConfig
 from serpar.controllers.batch_sensors import trial_seeds
 from serpar.controllers.cell_runtime import CellRuntime
+from serpar.errors import ConfigError
 from serpar.sim import names
 from serpar.sim.arm import HOME_Q, TCP_SITE
 from serpar.sim.trial_scene import TrialIds, build_trial_spec
@@ -30,6 +31,10 @@ from serpar.tasks.trial_start import TrialDraw, plan_start
 
 PEAK_TOLERANCE = 0.05
 """The issue's bar: a reproduced insertion's peak force within 5 % of the episode's."""
+NOISE_STREAMS = 4
+"""Sensor-noise streams each insertion is replayed with: the first is the trial's own (the
+row's outcome and peak); the others show how much the peak moves with the noise alone (on a
+sub-micrometre fit an entry impact in one 1 ms period may or may not happen)."""
 
 
 @dataclass(frozen=True)
@@ -48,6 +53,8 @@ class CellInsertion:
 class ValidationRow:
     episode: CellInsertion
     trial: TrialResult
+    stream_peaks: tuple[float, ...] = ()
+    """The trial's peak force [N] with each sensor-noise stream (the first is ``trial``'s)."""
 
     @property
     def same_outcome(self) -> bool:
@@ -71,6 +78,7 @@ class ValidationRow:
                 "trial_peak_n": self.trial.peak_force_n,
                 "episode_misalignment_mm": None if rec is None else rec.lateral_misalignment_mm,
                 "trial_misalignment_mm": self.trial.lateral_misalignment_mm,
+                "trial_peak_streams_n": list(self.stream_peaks or (self.trial.peak_force_n,)),
                 "same_outcome": self.same_outcome, "peak_ratio": self.peak_ratio}
 
 
@@ -116,8 +124,10 @@ def episode_insertions(cfg: EpisodeConfig) -> list[CellInsertion]:
     return out
 
 
-def replay_as_trials(insertions: list[CellInsertion], threads: int = 2) -> list[ValidationRow]:
-    """Each insertion's start as a trial, all in one batch."""
+def replay_as_trials(insertions: list[CellInsertion], threads: int = 2,
+                     streams: int = 1) -> list[ValidationRow]:
+    """Each insertion's start as a trial, all in one batch, with ``streams`` sensor-noise
+    streams each (the first, ``trial_seeds(0, [k])``, gives the row's trial)."""
     mc = MonteCarloConfig()
     scene = scene_config(mc)
     trials = []
@@ -126,16 +136,21 @@ def replay_as_trials(insertions: list[CellInsertion], threads: int = 2) -> list[
         model = build_trial_spec(scene, d.hole_diameter, d.journal_diameter, d.body_diameter).compile()
         start = plan_start(model, TrialIds.of(model), d, np.asarray(scene.entry),
                            scene.conductor.journal_length, np.array(HOME_Q), ins.height_mm * 1e-3)
-        trials.append(Trial(model, start, trial_seeds(0, [k])[0], d.hole_diameter))
+        trials += [Trial(model, start, trial_seeds(s, [k])[0], d.hole_diameter) for s in range(streams)]
     results = run_trials(trials, scene.chamfer, trial_config(mc), threads)
-    return [ValidationRow(ins, r) for ins, r in zip(insertions, results)]
+    return [ValidationRow(ins, results[k * streams],
+                          tuple(r.peak_force_n for r in results[k * streams:(k + 1) * streams]))
+            for k, ins in enumerate(insertions)]
 
 
-def validate(holes: int, seed: int, threads: int = 2) -> dict[str, object]:
+def validate(holes: int, seed: int, threads: int = 2, streams: int = NOISE_STREAMS) -> dict[str, object]:
     """An episode of ``holes`` holes (seed ``seed``) against its insertions replayed as trials:
-    the rows, how many outcomes agree and how many peaks are within 5 %."""
-    rows = replay_as_trials(episode_insertions(EpisodeConfig(seed=seed, holes=holes)), threads)
+    the rows, how many outcomes agree and how many peaks are within 5 % (each trial also run
+    with ``streams`` - 1 further sensor-noise streams: its peak's spread per row)."""
+    if streams < 1:
+        raise ConfigError(f"--streams {streams}: at least 1 sensor-noise stream")
+    rows = replay_as_trials(episode_insertions(EpisodeConfig(seed=seed, holes=holes)), threads, streams)
     peaks = [abs(r.peak_ratio - 1.0) <= PEAK_TOLERANCE for r in rows]
-    return {"episode_seed": seed, "insertions": len(rows),
+    return {"episode_seed": seed, "insertions": len(rows), "noise_streams": streams,
             "same_outcome": sum(r.same_outcome for r in rows), "peak_within_5pct": sum(peaks),
             "rows": [r.as_dict() for r in rows]}

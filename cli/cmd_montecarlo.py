@@ -19,7 +19,7 @@ from serpar.checks.montecarlo_config import MonteCarloConfig
 from serpar.checks.montecarlo_gpu import CHECK_SAMPLE, check_sample, run_gpu
 from serpar.checks.montecarlo_record import FOLDER, failed_rows, record_failed
 from serpar.checks.montecarlo_report import sensitivity_rows, write_montecarlo_report
-from serpar.checks.montecarlo_validation import validate
+from serpar.checks.montecarlo_validation import NOISE_STREAMS, validate
 from serpar.cli import arg_types
 from serpar.cli.cmd_run import check_ray
 from serpar.cli.out_paths import add_force, out_file, out_folder
@@ -73,6 +73,9 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="instead: run a HOLES-hole episode (seed --seed) and replay each of its "
                         "insertions as a trial from the state it started in; prints outcomes and "
                         "peak forces side by side")
+    p.add_argument("--streams", type=int, metavar="K", default=None,
+                   help=f"with --validate: replay each insertion with K sensor-noise streams, the "
+                        f"first the trial's own, and show its peak's spread (default {NOISE_STREAMS})")
     p.add_argument("--out", metavar="DIR", help="write DIR/trials.parquet (one row per trial), "
                                                 f"DIR/summary.json and the failed trials' recordings, "
                                                 f"DIR/{FOLDER}/trial_<k>.rrd")
@@ -112,6 +115,9 @@ def cmd_montecarlo(args: argparse.Namespace) -> int:
         if args.gpu_check < 1:
             raise ConfigError(f"--gpu-check {args.gpu_check}: a sample of at least 1 trial")
         check_device("cuda")  # before any work: the extra and a CUDA device
+    if args.streams is not None and args.validate is None:
+        raise ConfigError(f"--streams {args.streams} goes with --validate HOLES (the noise streams "
+                          "an episode's insertions are replayed with)")
     if args.validate is not None:
         return _validate(args)
     cfg = load_yaml_config(MonteCarloConfig, args.config) if args.config else MonteCarloConfig()
@@ -216,15 +222,17 @@ def _say_recorded(recorded: list, failed: int) -> None:
 def _validate(args: argparse.Namespace) -> int:
     if not 1 <= args.validate <= 36:
         raise ConfigError(f"--validate {args.validate}: holes 1..36")
-    report = validate(args.validate, args.seed, args.threads)
+    streams = NOISE_STREAMS if args.streams is None else args.streams
+    report = validate(args.validate, args.seed, args.threads, streams)
     if args.json:
         print_json(report)
         return 0
     rows = report["rows"]
     print(table(["hole", "clearance um", "episode", "trial", "peak N episode", "trial", "ratio",
-                 "misalign. mm episode", "trial"],
+                 f"trial, {streams} noise streams", "misalign. mm episode", "trial"],
                 [[r["hole"], f"{r['clearance_um']:.1f}", r["episode_outcome"], r["trial_outcome"],
                   f"{r['episode_peak_n']:.3f}", f"{r['trial_peak_n']:.3f}", f"{r['peak_ratio']:.3f}",
+                  f"{min(r['trial_peak_streams_n']):.3f}-{max(r['trial_peak_streams_n']):.3f}",
                   f"{r['episode_misalignment_mm']:.4f}", f"{r['trial_misalignment_mm']:.4f}"]
                  for r in rows]))  # type: ignore[union-attr]
     print(f"same outcome {report['same_outcome']}/{report['insertions']}; peak force within 5 % "

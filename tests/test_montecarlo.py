@@ -252,8 +252,14 @@ def test_the_bench_times_trials_against_bare_batched_stepping() -> None:
 @pytest.mark.slow
 def test_a_trial_from_an_episodes_insertion_start_reproduces_it() -> None:
     """An episode's insertions (seed 0, holes 0 and 1), replayed as trials from the state each
-    started in: the same outcome, the peak force within 5 %."""
+    started in: the same outcome, the peak force within 5 %; on these fits (9.5 and 3.4 um of
+    clearance) the peak is the push's, within 3 % over four sensor-noise streams."""
     report = validate(2, seed=0)
-    assert report["insertions"] == 2
+    assert report["insertions"] == 2 and report["noise_streams"] == 4
     assert report["same_outcome"] == 2
     assert report["peak_within_5pct"] == 2
+    for row in report["rows"]:
+        streams = row["trial_peak_streams_n"]
+        assert len(streams) == 4 and streams[0] == row["trial_peak_n"]
+        low, high = min(streams), max(streams)
+        assert high / low < 1.03, row
