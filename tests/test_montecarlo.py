@@ -224,10 +224,13 @@ def test_a_trial_with_delayed_torque_sensors_or_drives_is_refused(field: str) ->
                    trial_config(CFG))
 
 
-def test_bad_input_is_one_line(capsys) -> None:
-    assert main(["montecarlo", "--trials", "0"]) == 2
+@pytest.mark.parametrize("argv, names", [(["--trials", "0"], "--trials 0"),
+                                         (["--streams", "3"], "goes with --validate"),
+                                         (["--validate", "2", "--streams", "0"], "--streams 0")])
+def test_bad_input_is_one_line(capsys, argv: list[str], names: str) -> None:
+    assert main(["montecarlo", *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--trials 0" in err[0]
+    assert len(err) == 1 and names in err[0]
 
 
 @pytest.mark.slow
