@@ -53,7 +53,7 @@ class CellInsertion:
 class ValidationRow:
     episode: CellInsertion
     trial: TrialResult
-    stream_peaks: tuple[float, ...] = ()
+    stream_peaks: tuple[float, ...]
     """The trial's peak force [N] with each sensor-noise stream (the first is ``trial``'s)."""
 
     @property
@@ -78,7 +78,7 @@ class ValidationRow:
                 "trial_peak_n": self.trial.peak_force_n,
                 "episode_misalignment_mm": None if rec is None else rec.lateral_misalignment_mm,
                 "trial_misalignment_mm": self.trial.lateral_misalignment_mm,
-                "trial_peak_streams_n": list(self.stream_peaks or (self.trial.peak_force_n,)),
+                "trial_peak_streams_n": list(self.stream_peaks),
                 "same_outcome": self.same_outcome, "peak_ratio": self.peak_ratio}
 
 

@@ -121,18 +121,19 @@ def test_the_journals_round_keeps_the_parts_mass() -> None:
 def test_the_gpus_shared_tip_is_moved_onto_each_worlds_chamfer() -> None:
     """MuJoCo Warp's worlds share the thinnest journal's tip mesh; moved along the axis by the
     radius change (tasks/warp_batch.py), its 45 deg face lies on the world's own chamfer face."""
-    from serpar.sim.tolerances import JOURNAL_H6
     from serpar.tasks.warp_batch import _mesh_geom_poses
     shared = build_trial_spec(CELL_GPU, HOLE, JOURNAL_H6.min).compile()
     own = build_trial_spec(CELL_GPU, HOLE, JOURNAL_H6.max).compile()
     tip = own.geom(f"{names.conductor(PART)}tip").id
     moved = _with_geom_pos(shared, _mesh_geom_poses(shared, own)["geom_pos"])
-    for model in (own, moved):  # the face line: radial - z is one constant on a 45 deg cone
+
+    def face_line(model: mujoco.MjModel) -> np.ndarray:  # radial - z: one constant on a 45 deg cone
         v = mesh_vertices(model, tip)
-        line = np.hypot(v[:, 0], v[:, 1]) - v[:, 2]
-        if model is own:
-            want = line.max()
-        assert np.allclose(line, want, atol=2e-9)  # the polygon's vertices lie on the cone
+        return np.hypot(v[:, 0], v[:, 1]) - v[:, 2]
+
+    want = face_line(own).max()
+    for model in (own, moved):
+        assert np.allclose(face_line(model), want, atol=2e-9)  # the polygon's vertices lie on the cone
     assert shared.geom_pos[tip, 2] - moved.geom_pos[tip, 2] == pytest.approx((JOURNAL_H6.max - JOURNAL_H6.min) / 2, abs=1e-10)
 
 
