@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 
 def seed(text: str) -> int:
@@ -15,3 +16,16 @@ def seed(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"{value}: a seed is a non-negative integer (0, 1, 2, ...)")
     return value
+
+
+def span(text: str) -> tuple[float, float]:
+    """``START:END`` seconds from the first sample, START < END, both >= 0."""
+    start, sep, end = text.partition(":")
+    try:
+        a, b = float(start), float(end)
+    except ValueError:
+        a = b = float("nan")
+    if not sep or not (0 <= a < b) or not math.isfinite(b):
+        raise argparse.ArgumentTypeError(f"{text!r} is not START:END in seconds from the first "
+                                         "sample (0 <= START < END), e.g. 0.1:6")
+    return a, b

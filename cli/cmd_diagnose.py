@@ -11,6 +11,7 @@ from serpar.cli.cmd_export_mjcf import export_summary, print_export
 from serpar.cli.out_paths import add_force, out_file, out_files
 from serpar.cli.output import print_json, progress, table
 from serpar.cli.robot_option import add_robot_option
+from serpar.diagnosis.arm_dynamics_family import ArmDynamicsConfig
 from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis, load_notes
 from serpar.diagnosis.config_model import is_config_path, model_from_episode_config
 from serpar.diagnosis.prior import PriorFamily
@@ -46,6 +47,12 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=arg_types.seed, default=0, help="seed of the train/held-out split "
                                                        "where the recording does not fix it")
     add_robot_option(p)
+    p.add_argument("--train", type=arg_types.span, metavar="START:END",
+                   help="arm dynamics: train on the windows inside START:END seconds from the "
+                        "first sample (with --heldout; the resampling folds stay inside it); "
+                        "default: alternate 2-s blocks of the whole recording")
+    p.add_argument("--heldout", type=arg_types.span, metavar="START:END",
+                   help="arm dynamics: hold out the windows inside START:END seconds (with --train)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_diagnose)
     return p
@@ -100,7 +107,12 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         raise ConfigError(f"--mjcf writes serpar's Panda arm; this is a diagnosis of "
                           f"{robot.label} ({robot.source})")
     rec = load_for_diagnosis(args.recording, robot)
-    family = family_from_recording(rec, robot)
+    train, heldout = getattr(args, "train", None), getattr(args, "heldout", None)
+    if (train is None) != (heldout is None):
+        raise ConfigError("--train and --heldout go together: give both spans, e.g. "
+                          "--train 0.1:6 --heldout 6:7.5")
+    dynamics = None if train is None else ArmDynamicsConfig(train_span=train, heldout_span=heldout)
+    family = family_from_recording(rec, robot, dynamics)
     notes = load_notes(rec) + list(getattr(family, "notes", ()))  # the data's, then the family's
     prior = None
     if args.model:

@@ -1,5 +1,6 @@
-"""``serpar import FILE... [--map src=channel,...] --out DIR``: data as published into the
-recording schema (serpar.sim.importers). ``import-csv`` is its old name, kept as an alias."""
+"""``serpar import FILE... [--map src=channel,...] [--spec F.yaml] --out DIR``: data as
+published into the recording schema (serpar.sim.importers). ``import-csv`` is its old name,
+kept as an alias. A flag and the spec may be combined, but not both set one thing."""
 
 from __future__ import annotations
 
@@ -11,8 +12,10 @@ from pathlib import Path
 from serpar.calibration.arm_static_data import static_data
 from serpar.cli.out_paths import add_force, out_folder
 from serpar.cli.output import print_json
+from serpar.errors import ConfigError
 from serpar.sim.importers.assemble import ImportOptions, parse_map, to_recording
 from serpar.sim.importers.files import FORMATS, file_format, read_files
+from serpar.sim.importers.spec import SPEC_KEYS, ImportSpec, load_spec
 from serpar.sim.recording import RecordingError, write_recording
 
 BAG_MAP = "time=time,position=q,velocity=dq,effort=tau_J"
@@ -45,6 +48,11 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                    "for measurements: sigma_m=15e-6")
     p.add_argument("--model", help="JSON merged into meta.model (e.g. the measurements' "
                                    "tool_offset_m, distances)")
+    p.add_argument("--spec", metavar="F.yaml",
+                   help=f"how the data becomes a recording, in YAML (keys "
+                        f"{', '.join(SPEC_KEYS)}): column map, source rate, scale, a "
+                        "motor-to-joint map, decimation to an output rate, noise sigma from a "
+                        "rest segment; see docs/recording.md")
     p.add_argument("--out", required=True, help="output recording folder (an existing one is refused "
                                                 "unless --force, which replaces its recording files)")
     add_force(p)
@@ -64,6 +72,20 @@ def _sigma(text: str | None) -> dict[str, float]:
     return sigma
 
 
+def _refuse_both(args: argparse.Namespace, spec: ImportSpec | None, extra: dict) -> None:
+    """A flag and the spec that set one thing: which one was meant is not ours to guess."""
+    if spec is None:
+        return
+    if args.table != "signals":
+        raise RecordingError("--spec is for time series (--table signals)")
+    pairs = (("--map", "map", bool(args.map and spec.map)),
+             ("--rate", "source_rate", args.rate is not None and spec.source_rate is not None),
+             ("--model's robot", "robot", "robot" in extra and spec.robot is not None))
+    both = [f"{flag} and the spec's {key}" for flag, key, clash in pairs if clash]
+    if both:
+        raise ConfigError(f"{both[0]} both set it; give one (the spec: {args.spec})")
+
+
 def cmd_import(args: argparse.Namespace) -> int:
     folder = out_folder(args.out, "--out", args.force)  # before any file is read
     sigma = _sigma(args.sigma)
@@ -71,28 +93,40 @@ def cmd_import(args: argparse.Namespace) -> int:
         extra = json.loads(args.model) if args.model else {}
     except json.JSONDecodeError as exc:
         raise RecordingError(f"--model is not valid JSON: {exc.msg}") from None
+    if not isinstance(extra, dict):
+        raise RecordingError(f"--model must be a JSON object, got {type(extra).__name__}")
+    spec = load_spec(args.spec) if args.spec else None
+    _refuse_both(args, spec, extra)
     if args.table == "measurements":
         meas = dict(extra.get("measurements", {}))
         if "sigma_m" in sigma:
             meas["sigma_m"] = sigma.pop("sigma_m")
         extra["measurements"] = meas
-    options = ImportOptions(args.table, args.rate, not args.no_grid)
+    rate = args.rate if args.rate is not None else spec.source_rate if spec else None
+    options = ImportOptions(args.table, rate, not args.no_grid)
     raw = read_files(args.files, args.format, args.topic)
     bag = all(file_format(Path(f), args.format) == "rosbag" for f in args.files)
-    mapping = parse_map(args.map) if args.map else (parse_map(BAG_MAP) if bag else None)
-    rec, report = to_recording(raw, mapping, options, sigma, extra)
+    mapping = (parse_map(args.map) if args.map else dict(spec.map) if spec and spec.map
+               else parse_map(BAG_MAP) if bag else None)
+    rec, report = to_recording(raw, mapping, options, sigma, extra, spec)
     if args.table == "measurements":
         static_data(rec)  # validate now, one line, rather than at diagnosis time
     folder.clear()
     out = write_recording(folder.path, rec)
     if args.json:
         print_json({"out": str(out), "channels": list(rec.meta.channels),
-                    "sample_rate_hz": rec.meta.sample_rate_hz, **report.as_dict()})
+                    "sample_rate_hz": rec.meta.sample_rate_hz,
+                    "rows_written": rec.signals.num_rows, **report.as_dict()})
         return 0
-    print(f"wrote {out}: {report.rows} rows kept, {len(report.excluded)} isolated bad "
+    rows = rec.signals.num_rows
+    resampled = (f" ({rows} at {rec.meta.sample_rate_hz:g} Hz written)"
+                 if report.spec and rows != report.rows else "")
+    print(f"wrote {out}: {report.rows} rows kept{resampled}, {len(report.excluded)} isolated bad "
           f"sample(s) excluded" + "".join(f"\n  {w}: {why}" for w, why in report.excluded))
     if report.grid is not None:
         print("  " + report.grid.words())
+    for step in report.conversions:
+        print(f"  {step}")
     for note in report.notes:
         print(f"  note: {note}", file=sys.stderr)
     return 0

@@ -21,7 +21,6 @@ from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.empirical import BasisGroup
-from serpar.sim import channels as ch
 
 Vec = NDArray[np.float64]
 
@@ -43,17 +42,21 @@ def _group(channel: str, variable: str, shape: str, label: str, column: int, win
                       column=column, detail=detail or {})
 
 
-def arm_library(t: Terms) -> list[BasisGroup]:
-    """Every group of the arm's library; columns 0-6 are tau_J1..7, 7-13 tau_J_d1..7."""
+def arm_library(t: Terms, channels: tuple[str, ...], blocks: tuple[str, ...]) -> list[BasisGroup]:
+    """Every group of the arm's library over the family's ``channels`` (``blocks``: ``link``
+    and/or ``drive``, n channels each, in that order)."""
     out: list[BasisGroup] = []
     q, v = t.q_full, t.dq_full
     time = np.arange(len(q)) / t.rate
     span = max(time[-1], 1e-9)
     drifts = [("linear", time / span)] + [
         (f"1 - exp(-t / {tau * span:.0f} s)", 1.0 - np.exp(-time / (tau * span))) for tau in DRIFT_TAUS]
-    for j in range(7):
-        for column, name, window, sigma in ((j, ch.TAU_J[j], t.rows.link_at, t.sigma_link),
-                                            (7 + j, ch.TAU_J_D[j], t.rows.at, t.sigma_drive)):
+    n = t.n
+    kinds = {"link": (t.rows.link_at, t.sigma_link), "drive": (t.rows.at, t.sigma_drive)}
+    for j in range(n):
+        for b, block in enumerate(blocks):
+            column, name = b * n + j, channels[b * n + j]
+            window, sigma = kinds[block]
             s = sigma[:, j]
             qj, vj = f"q{j + 1}", f"dq{j + 1}"
             for k in CYCLES_PER_TURN:

@@ -18,46 +18,57 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from serpar.diagnosis.arm_dynamics_effects import (
-    BASELINE,
-    COMMAND_ONLY,
-    EFFECTS,
-    STICK_VELOCITY,
-    EffectModels,
-)
+from serpar.diagnosis.arm_dynamics_effects import STICK_VELOCITY, EffectModels
 from serpar.diagnosis.arm_dynamics_empirical import arm_library
+from serpar.diagnosis.arm_dynamics_grouping import hold_grouped
 from serpar.diagnosis.arm_dynamics_jacobian import residual_jacobian, tare_columns
-from serpar.diagnosis.arm_dynamics_signals import SmoothingConfig, read_arm_series
+from serpar.diagnosis.arm_dynamics_library import (
+    COMMAND_ONLY,
+    Channels,
+    arm_effects,
+    tare,
+)
+from serpar.diagnosis.arm_dynamics_setup import (
+    bridge_variance,
+    check_scale,
+    declared_couplings,
+    drifting_tare,
+    encoder_visibility,
+    stated_tare_walk,
+)
+from serpar.diagnosis.arm_dynamics_signals import (
+    DRIVE_PREFIX,
+    SmoothingConfig,
+    read_arm_series,
+)
 from serpar.diagnosis.arm_dynamics_terms import Terms, compute_terms, row_sigma
 from serpar.diagnosis.empirical import BasisGroup
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows
 from serpar.diagnosis.residual import consecutive_noise_ratio
+from serpar.diagnosis.stability import default_folds
 from serpar.diagnosis.units import UnitView, per_row
 from serpar.errors import IdentificationError
 from serpar.sim import channels as ch
 from serpar.sim.recording import Recording
-from serpar.sim.rigid_arm import ArmDynamics
+from serpar.sim.rigid_arm import PANDA_ARM, ArmDynamics, ArmModel
 
 Vec = NDArray[np.float64]
+Span = tuple[float, float]
 
 KIND = "arm_dynamics"
 BLOCK_S = 2.0
 """Length of the alternating training / held-out time blocks [s]."""
 CHANNELS: tuple[str, ...] = ch.TAU_J + ch.TAU_J_D
-"""Residual columns of one row, in order (a recording without tau_J_d: tau_J alone)."""
+"""The Panda's residual columns of one row with sensors and command, in order."""
 TOP_SHARE = 0.25
 """A row is in a joint's "high gravity load" / "high acceleration" regime when it is in the
 top quarter of that joint's |g| / |q̈| over the recording."""
 TIME_BINS = 3
-SCALE_RANGE = (0.5, 2.0)
-"""Accepted regression slope of a joint's measured on its nominal torque: a payload or a gain
-error moves it by tens of per cent; N mm for N m, or another robot, by far more."""
-PIN_SHARE = 0.5
-"""A drifting tare's knot is kept only with a training row within this share of the spacing:
-a knot that only distant rows pin is fixed by leverage, and noise swings it."""
-SCALE_MIN_RMS = 1.0
-"""[N m] Joints whose nominal torque varies less than this are not tested for scale."""
+MAX_EFFECTS_DRIVE = 6
+"""Effects a measured drive torque may need at once: friction, its Stribeck fall, rotor
+inertia, a coupled motor, link inertia, a gain (a real drive has them all; each must still
+earn its place and hold up under resampling)."""
 
 
 @dataclass(frozen=True)
@@ -66,11 +77,16 @@ class ArmDynamicsConfig:
     block_s: float = BLOCK_S
     tare_knot_s: float | None = None
     """None: one constant tare per torque sensor. A spacing [s]: each sensor's tare is a
-    piecewise-linear function of time with knots this far apart (the baseline then has 7 values
+    piecewise-linear function of time with knots this far apart (the baseline then has n values
     per knot), for recordings long enough that the sensor zero's random walk shows."""
     stick_velocity: float = STICK_VELOCITY
     """[rad/s] Below this speed a joint with dry friction may be stuck (its friction anywhere in
     +-Fc): the rows weigh it as an interval."""
+    train_span: Span | None = None
+    heldout_span: Span | None = None
+    """Seconds from the first sample: the rows (whole windows) inside ``train_span`` train and
+    those inside ``heldout_span`` are held out; the resampling folds stay inside the training
+    span. None (both): alternate ``block_s`` blocks of the whole recording."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.stick_velocity < 1.0:
@@ -81,33 +97,60 @@ class ArmDynamicsConfig:
         if self.tare_knot_s is not None and not self.tare_knot_s > 0:
             raise IdentificationError(f"ArmDynamicsConfig.tare_knot_s={self.tare_knot_s} must be "
                                       "> 0 or None")
+        if (self.train_span is None) != (self.heldout_span is None):
+            raise IdentificationError("give both the training and the held-out span, or neither")
+        if self.train_span is not None and self.heldout_span is not None:
+            (a, b), (c, d) = self.train_span, self.heldout_span
+            if not (0 <= a < b and 0 <= c < d):
+                raise IdentificationError(f"spans {a}:{b} and {c}:{d} s must be start < end, >= 0")
+            if a < d and c < b:
+                raise IdentificationError(f"the training span {a}:{b} s and the held-out span "
+                                          f"{c}:{d} s overlap; held-out rows must be unseen")
 
 
 class ArmDynamicsFamily:
-    """The :class:`~serpar.diagnosis.family.Family` of one arm recording."""
+    """The :class:`~serpar.diagnosis.family.Family` of one arm recording, for any arm."""
 
     kind = KIND
 
     def __init__(self, terms: Terms, dynamics: ArmDynamics, cfg: ArmDynamicsConfig,
-                 phases: tuple[tuple[str, float, float], ...] = (), tare_walk: float = 0.0) -> None:
-        self.terms, self.cfg = terms, cfg
-        self.baseline: Effect | None = BASELINE
+                 phases: tuple[tuple[str, float, float], ...] = (), tare_walk: float = 0.0,
+                 effects: tuple[Effect, ...] | None = None,
+                 models: EffectModels | None = None) -> None:
+        self.terms, self.cfg, self.arm = terms, cfg, dynamics.arm
+        n = self.n = terms.n
+        drive = ch.numbered(DRIVE_PREFIX if terms.drive_measured else "tau_J_d", n)
+        blocks = ([ch.numbered("tau_J", n)] if terms.has_link else []) + (
+            [drive] if terms.has_command else [])
+        self.channels: tuple[str, ...] = tuple(c for b in blocks for c in b)
+        self._blocks = (("link",) if terms.has_link else ()) + (
+            ("drive",) if terms.has_command else ())
+        # the tares sit on the measured torque: the link-side sensors, else the drive torque
+        self.tare_block = "link" if terms.has_link else "drive"
+        self._base = tare(n, "tare" if terms.has_link else "drive_tare")
+        self.baseline: Effect | None = self._base
         self._knots: Vec | None = None
         self._tare_walk = tare_walk
         self._tare_var: Vec | None = None
         if cfg.tare_knot_s is not None:
             self.pin_tare_knots(np.arange(len(terms.time)))
-        self.channels = CHANNELS if terms.has_command else ch.TAU_J
-        self.effects: tuple[Effect, ...] = (EFFECTS if terms.has_command else
-                                            tuple(e for e in EFFECTS if e.name not in COMMAND_ONLY))
+        self._models = models or EffectModels(terms, dynamics, cfg.stick_velocity)
+        self.effects: tuple[Effect, ...] = effects if effects is not None else arm_effects(
+            n, Channels(terms.has_link, None), (), (), dynamics.armature)
         self.notes: tuple[str, ...] = () if terms.has_command else (
-            ("no commanded torque (tau_J_d) in the recording: only the torque sensors' channel "
-             f"is compared, and {', '.join(COMMAND_ONLY)} (which only the command shows: "
-             "friction inside the drive acts before the torque sensor) are not candidates"),)
+            ("no commanded torque (tau_J_d) nor drive torque (tau_drive) in the recording: only "
+             "the torque sensors' channel is compared, and friction inside the drive, rotor "
+             "inertia and latency (which only the drive's torque shows) are not candidates"),)
+        if terms.has_command and not terms.has_link:
+            self.notes += ((f"no link-side torque sensors (tau_J): friction and rotor inertia are "
+                            f"named as drive effects; {', '.join(COMMAND_ONLY)} needs a command"
+                            if terms.drive_measured else
+                            "no link-side torque sensors (tau_J): the command alone is compared"),)
         self.n_samples = len(terms.time)
-        self._models = EffectModels(terms, dynamics, cfg.stick_velocity)
         self._phases = phases
         self._regimes = self._regime_masks()
+        if terms.drive_measured:
+            self.max_effects = MAX_EFFECTS_DRIVE
 
     # -- Family protocol -------------------------------------------------------------------
     def residual(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
@@ -115,9 +158,8 @@ class ArmDynamicsFamily:
         # stiction: within the band a residual is static friction, not a misfit
         drive = np.sign(drive) * np.maximum(np.abs(drive) - band, 0.0)
         link = np.sign(link) * np.maximum(np.abs(link) - link_band, 0.0)
-        if not self.terms.has_command:
-            return (link / sigma_link).ravel()
-        return np.hstack([link / sigma_link, drive / sigma_drive]).ravel()
+        parts = {"link": link / sigma_link, "drive": drive / sigma_drive}
+        return np.hstack([parts[b] for b in self._blocks]).ravel()
 
     def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
         """d residual / d params (diagnosis/arm_dynamics_jacobian.py)."""
@@ -136,9 +178,12 @@ class ArmDynamicsFamily:
         t = self.terms
         link_model, drive_model, link_band, band = self._models.contributions(params, rows)
         link = t.link[rows] - link_model
-        if BASELINE.name in params:
-            link = link - self._tare(params[BASELINE.name], rows)
         drive = t.drive[rows] - drive_model
+        if self._base.name in params:
+            if self.tare_block == "link":
+                link = link - self._tare(params[self._base.name], rows)
+            else:
+                drive = drive - self._tare(params[self._base.name], rows)
         added = self._models.added_inertia(params, rows)
         if added is None:
             sigma_link, sigma_drive = t.sigma_link[rows], t.sigma_drive[rows]
@@ -156,24 +201,27 @@ class ArmDynamicsFamily:
         return None if r is None else (r, "sample-to-sample differences")
 
     def in_units(self, rows: NDArray[np.int64]) -> UnitView:
-        """Each joint's torque channels in N m (windowed, as compared): the sensor's and, with
-        a command, the command's; measured = the windowed recording."""
+        """Each joint's torque channels in N m (windowed, as compared): the sensor's and the
+        drive's, where the recording has them; measured = the windowed recording."""
         t, n = self.terms, len(self.channels)
         channel, axis = per_row(t.time[rows], n)
         link = (t.sigma_link[rows] if self._tare_var is None
                 else np.sqrt(t.sigma_link[rows] ** 2 + self._tare_var[rows, None]))
-        sigma = np.hstack([link, t.sigma_drive[rows]])[:, :n]
-        measured = np.hstack([t.link[rows] + t.tau_link_model[rows],
-                              t.drive[rows] + t.tau_full_model[rows]])[:, :n]
-        return UnitView(self.channels, ("N m",) * n, channel, sigma.ravel(), axis,
-                        "time [s]", measured.ravel())
+        sigma = {"link": link, "drive": t.sigma_drive[rows]}
+        measured = {"link": t.link[rows] + t.tau_link_model[rows],
+                    "drive": t.drive[rows] + t.tau_full_model[rows]}
+        return UnitView(self.channels, ("N m",) * n, channel,
+                        np.hstack([sigma[b] for b in self._blocks]).ravel(), axis,
+                        "time [s]", np.hstack([measured[b] for b in self._blocks]).ravel())
 
     def empirical_library(self) -> list[BasisGroup]:
         """Shapes in each joint's angle, velocity and time (diagnosis/arm_dynamics_empirical.py)."""
-        groups = arm_library(self.terms)
-        return groups if self.terms.has_command else [g for g in groups if g.channel in ch.TAU_J]
+        return arm_library(self.terms, self.channels, self._blocks)
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        if self.cfg.train_span is not None and self.cfg.heldout_span is not None:
+            train, held = self._span(self.cfg.train_span), self._span(self.cfg.heldout_span)
+            return train, held
         block = np.floor((self.terms.time - self.terms.time[0]) / self.cfg.block_s).astype(int)
         first = int(rng.integers(2))  # which parity trains: either way, whole blocks
         train = np.flatnonzero(block % 2 == first)
@@ -183,12 +231,31 @@ class ArmDynamicsFamily:
                                       f"gives no two {self.cfg.block_s} s blocks to train and hold out")
         return train, held
 
+    def folds(self, k: int) -> list[tuple[NDArray[np.int64], NDArray[np.int64]]]:
+        """Resampling folds: inside the training span where one is given, else over every row."""
+        if self.cfg.train_span is None:
+            return default_folds(self.n_samples, k)
+        rows = self._span(self.cfg.train_span)
+        return [(rows[a], rows[b]) for a, b in default_folds(len(rows), k)]
+
+    def _span(self, span: Span) -> NDArray[np.int64]:
+        """Rows whose whole window lies inside ``span`` (seconds from the first sample)."""
+        t = self.terms
+        start = t.time[0] - t.rows.half / t.rate  # the first sample's time
+        half = t.rows.half / t.rate
+        rel = t.time - start
+        rows = np.flatnonzero((rel - half >= span[0]) & (rel + half <= span[1]))
+        if rows.size == 0:
+            raise IdentificationError(f"no window lies inside {span[0]:g}:{span[1]:g} s (the "
+                                      f"recording covers 0:{rel[-1] + half:.3g} s)")
+        return rows
+
     def locate(self, rows: NDArray[np.int64], whitened: Vec) -> list[LocateRow]:
         rows = np.asarray(rows, np.int64)
         w = np.asarray(whitened, float).reshape(len(rows), len(self.channels))
         groups = []
         for c, channel in enumerate(self.channels):
-            j = c % 7
+            j = c % self.n
             groups.append((channel, "all", "all rows", w[:, c]))
             for (group, label), mask in self._regimes.items():
                 m = mask[rows] if mask.ndim == 1 else mask[rows, j]
@@ -200,17 +267,17 @@ class ArmDynamicsFamily:
         a knot only held-out rows could fix would be a free parameter fitted on nothing."""
         if self.cfg.tare_knot_s is not None:
             self._knots, self.baseline = drifting_tare(self.terms.time, self.terms.time[train],
-                                                       self.cfg.tare_knot_s)
+                                                       self.cfg.tare_knot_s, self._base)
             if self._tare_walk > 0:
                 self._tare_var = bridge_variance(self.terms.time, self._knots, self._tare_walk)
 
     def _tare(self, values: Vec, rows: NDArray[np.int64]) -> Vec:
-        """Per-row tares (rows, 7): constant, or interpolated between the knots."""
+        """Per-row tares (rows, n): constant, or interpolated between the knots."""
         if self._knots is None:
             return values
-        table = values.reshape(len(self._knots), 7)
+        table = values.reshape(len(self._knots), self.n)
         t = self.terms.time[rows]
-        return np.stack([np.interp(t, self._knots, table[:, j]) for j in range(7)], axis=1)
+        return np.stack([np.interp(t, self._knots, table[:, j]) for j in range(self.n)], axis=1)
 
     # -- where -----------------------------------------------------------------------------
     def _regime_masks(self) -> dict[tuple[str, str], NDArray[np.bool_]]:
@@ -241,67 +308,25 @@ class ArmDynamicsFamily:
         return masks
 
 
-def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None
-                          ) -> ArmDynamicsFamily:
-    """The arm-dynamics family of `rec` (IdentificationError names what the recording lacks)."""
+def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None,
+                          arm: ArmModel = PANDA_ARM) -> ArmDynamicsFamily:
+    """The arm-dynamics family of `rec` for ``arm`` (IdentificationError names what the
+    recording lacks)."""
     cfg = cfg or ArmDynamicsConfig()
-    series = read_arm_series(rec)
-    dynamics = ArmDynamics()
+    series = read_arm_series(rec, arm)
+    dynamics = ArmDynamics(arm=arm)
     terms = compute_terms(series, cfg.smoothing, dynamics)
-    check_scale(terms)
+    drive_name = DRIVE_PREFIX if terms.drive_measured else "tau_J_d"
+    check_scale(terms, arm.name, drive_name)
+    offsets, scales = encoder_visibility(terms, dynamics)
+    couplings = declared_couplings(rec, arm.n)
+    models = EffectModels(terms, dynamics, cfg.stick_velocity, offsets, scales, couplings)
+    drive = (("measured" if terms.drive_measured else "command") if terms.has_command else None)
+    effects = arm_effects(arm.n, Channels(terms.has_link, drive), offsets, scales,
+                          dynamics.armature, couplings, arm.friction_bounds)
+    effects, held = hold_grouped(effects, terms, dynamics, couplings)
     phases = tuple((p.name, p.start, p.end) for p in rec.meta.phases)
-    return ArmDynamicsFamily(terms, dynamics, cfg, phases, stated_tare_walk(rec))
-
-
-def stated_tare_walk(rec: Recording) -> float:
-    """The torque sensors' bias random walk [N m/sqrt(s)] the recording states as part of its
-    noise model (``model.arm_sensors.torque_bias_walk``, as `serpar run --record` writes it),
-    0 when it states none."""
-    sensors = rec.meta.model.get("arm_sensors")
-    walk = sensors.get("torque_bias_walk", 0.0) if isinstance(sensors, dict) else 0.0
-    return float(walk) if isinstance(walk, (int, float)) and np.isfinite(walk) and walk > 0 else 0.0
-
-
-def bridge_variance(time: Vec, knots: Vec, walk: float) -> Vec:
-    """Per row, the variance of a random-walk tare (intensity `walk`) about the piecewise-linear
-    tare through `knots`: a Brownian bridge between two knots, w^2 (t - a)(b - t)/(b - a), and
-    a free walk beyond the end knots, where the tare is held constant. It belongs to the
-    stated noise: a held-out row's tare is interpolated across a block no training row pins."""
-    if len(knots) == 0:
-        return np.full(len(time), walk**2 * (time[-1] - time[0]))
-    i = np.clip(np.searchsorted(knots, time), 1, max(len(knots) - 1, 1))
-    a, b = knots[i - 1], knots[np.minimum(i, len(knots) - 1)]
-    inside = (time >= knots[0]) & (time <= knots[-1]) & (b > a)
-    var = np.where(inside, (time - a) * (b - time) / np.where(b > a, b - a, 1.0), 0.0)
-    var = np.where(time < knots[0], knots[0] - time, var)
-    var = np.where(time > knots[-1], time - knots[-1], var)
-    return walk**2 * var
-
-
-def drifting_tare(time: Vec, pinned_by: Vec, spacing_s: float) -> tuple[Vec, Effect]:
-    """Knot times (every ``spacing_s`` from the first row, each with a ``pinned_by`` time
-    within one spacing) and the baseline Effect of a piecewise-linear tare per sensor
-    (constant beyond the end knots)."""
-    grid = time[0] + spacing_s * np.arange(int(np.ceil((time[-1] - time[0]) / spacing_s)) + 1)
-    near = np.abs(grid[:, None] - pinned_by[None, :]).min(axis=1) < PIN_SHARE * spacing_s
-    knots = grid[near]
-    names = tuple(f"tare{j}@{t - time[0]:.0f}s" for t in knots for j in range(1, 8))
-    k = len(names)
-    return knots, Effect(BASELINE.name, "torque sensor offsets (tares), drifting in time", names,
-                         ("N m",) * k, np.zeros(k), np.full(k, -20.0), np.full(k, 20.0))
-
-
-def check_scale(terms: Terms) -> None:
-    """IdentificationError when a torque channel does not scale like the nominal model: units
-    other than N m, or a recording of another robot."""
-    channels = (("tau_J", terms.link + terms.tau_link_model, terms.tau_link_model),
-                ("tau_J_d", terms.drive + terms.tau_full_model, terms.tau_full_model))
-    for name, measured, model in channels[:2 if terms.has_command else 1]:
-        x = model - model.mean(axis=0)
-        y = measured - measured.mean(axis=0)
-        for j in np.flatnonzero(np.sqrt(np.mean(x**2, axis=0)) > SCALE_MIN_RMS):
-            slope = float(x[:, j] @ y[:, j] / (x[:, j] @ x[:, j]))
-            if not SCALE_RANGE[0] <= slope <= SCALE_RANGE[1]:
-                raise IdentificationError(
-                    f"{name}{j + 1} varies {slope:.3g} times as much as the nominal Panda model "
-                    "predicts from q: not in N m, or a recording of another robot")
+    family = ArmDynamicsFamily(terms, dynamics, cfg, phases, stated_tare_walk(rec), effects,
+                               models)
+    family.notes += arm.notes + held
+    return family

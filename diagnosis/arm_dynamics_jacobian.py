@@ -1,7 +1,9 @@
 """The arm-dynamics residual's Jacobian for the fit (diagnosis/fit.py takes a family's own).
 
-Forward differences as scipy's ``"2-point"`` takes them (step sqrt(eps) max(1, |x|), signed
-like x) for every effect's parameters, and exact columns for the torque tares: a tare enters
+Exact columns for the effects linear in their parameters (friction, rotor inertia, a coupled
+motor, a torque gain: arm_dynamics_effects.linear_columns), forward differences as scipy's
+``"2-point"`` takes them (step sqrt(eps) max(1, |x|), signed like x) for every other effect's,
+and exact columns for the torque tares: a tare enters
 the link channel linearly, so its column is minus its interpolation weight at the row, through
 the stiction band, over the row's sigma. An episode's drifting tare has seven parameters per
 knot, hundreds in all, each of which cost a whole residual evaluation by differences: with
@@ -17,8 +19,9 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from serpar.diagnosis.arm_dynamics_effects import BASELINE
+from serpar.diagnosis.arm_dynamics_effects import LINEAR, EffectModels, linear_columns
 from serpar.diagnosis.arm_dynamics_terms import Terms
+from serpar.diagnosis.family import Effect
 
 Vec = NDArray[np.float64]
 FD_STEP = float(np.sqrt(np.finfo(float).eps))
@@ -33,6 +36,12 @@ def forward_step(x: float) -> float:
 class _ArmFamily(Protocol):
     terms: Terms
     _knots: Vec | None
+    baseline: Effect | None
+    channels: tuple[str, ...]
+    tare_block: str
+    _blocks: tuple[str, ...]
+    _models: EffectModels
+    n: int
 
     def residual(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec: ...
 
@@ -52,22 +61,46 @@ def _tare_weights(family: _ArmFamily, rows: NDArray[np.int64]) -> Vec:
 
 def tare_columns(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64]
                  ) -> sp.csr_matrix:
-    """The residual's exact derivative by every tare parameter (knot-major, 7 per knot),
-    sparse: a row's link channel depends on the two knots around it, its drive channel on none."""
-    link, _, link_band, _, sigma_link, _ = family.misfits(params, rows)
-    slope = (np.abs(link) > link_band) / sigma_link  # rows x 7: through the band, whitened
+    """The residual's exact derivative by every tare parameter (knot-major, n per knot),
+    sparse: a row's measured channel (the link-side sensors, else the drive torque) depends on
+    the two knots around it, any other channel on none."""
+    link, drive, link_band, band, sigma_link, sigma_drive = family.misfits(params, rows)
+    if family.tare_block == "link":
+        slope = (np.abs(link) > link_band) / sigma_link  # rows x n: through the band, whitened
+    else:
+        slope = (np.abs(drive) > band) / sigma_drive
+    n = family.n
+    first = family._blocks.index(family.tare_block) * n
     weights = _tare_weights(family, rows)  # knots x rows
-    n_ch = 14 if family.terms.has_command else 7
+    n_ch = len(family.channels)
     knot, row = np.nonzero(weights)
     r_idx, c_idx, vals = [], [], []
-    for j in range(7):
+    for j in range(n):
         v = -weights[knot, row] * slope[row, j]
         keep = v != 0
-        r_idx.append(row[keep] * n_ch + j)
-        c_idx.append(knot[keep] * 7 + j)
+        r_idx.append(row[keep] * n_ch + first + j)
+        c_idx.append(knot[keep] * n + j)
         vals.append(v[keep])
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(r_idx), np.concatenate(c_idx))),
-                         shape=(len(rows) * n_ch, weights.shape[0] * 7))
+                         shape=(len(rows) * n_ch, weights.shape[0] * n))
+
+
+def _exact(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64], name: str,
+           misfit: tuple[Vec, ...]) -> Vec | None:
+    """The exact columns of an effect linear in its parameters (arm_dynamics_effects.LINEAR,
+    a coupled motor): through the stiction band where the misfit is outside it, whitened."""
+    parts = linear_columns(family._models, name, params, rows)
+    if parts is None:
+        return None
+    d_link, d_drive, d_link_band, d_band = parts
+    link, drive, link_band, band, sigma_link, sigma_drive = misfit
+    outside_link = (np.abs(link) > link_band).astype(float)
+    outside = (np.abs(drive) > band).astype(float)
+    out = {"link": -outside_link * (d_link + np.sign(link) * d_link_band) / sigma_link,
+           "drive": -outside * (d_drive + np.sign(drive) * d_band) / sigma_drive}
+    # params x rows x (blocks x n), row-major like the residual
+    cols = np.concatenate([out[b] for b in family._blocks], axis=2)
+    return cols.reshape(cols.shape[0], -1).T
 
 
 def residual_jacobian(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64]
@@ -75,11 +108,17 @@ def residual_jacobian(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArr
     """Columns in the mapping's block order (each block's parameters in its order)."""
     rows = np.asarray(rows, np.int64)
     base = family.residual(params, rows)
+    misfit = family.misfits(params, rows)
     cols = []
     for name, values in params.items():
         values = np.asarray(values, float)
-        if name == BASELINE.name:
+        if family.baseline is not None and name == family.baseline.name:
             cols.append(tare_columns(family, params, rows).toarray())
+            continue
+        exact = (_exact(family, params, rows, name, misfit)
+                 if name in LINEAR or name.startswith("coupled_pair") else None)
+        if exact is not None:
+            cols.append(exact)
             continue
         for i in range(values.size):
             v = values.copy()

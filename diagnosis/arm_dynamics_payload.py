@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from serpar.sim.plants.arm_changes import inertia_from_extent
-from serpar.sim.rigid_arm import FLANGE_BODY, FLANGE_Z, ArmDynamics, rigid_arm_spec
+from serpar.sim.rigid_arm import PANDA_ARM, ArmDynamics, ArmModel
 
 if TYPE_CHECKING:  # arm_dynamics_terms imports this module (load_torque)
     from serpar.diagnosis.arm_dynamics_terms import Terms
@@ -28,19 +28,23 @@ def payload_inertial(p: Vec) -> Vec:
     return np.r_[p[:4], inertia_from_extent(float(p[0]), p[4:10])]
 
 
-def standard_parameters(p: Vec) -> Vec:
-    """(mass, CoM from the flange, inertia about the CoM) -> (m, m c, inertia about the link-7
-    origin: xx, yy, zz, xy, xz, yz), in which inverse dynamics is linear."""
+PANDA_FLANGE = np.array(PANDA_ARM.flange_pos)
+
+
+def standard_parameters(p: Vec, flange: Vec = PANDA_FLANGE) -> Vec:
+    """(mass, CoM from the flange, inertia about the CoM) -> (m, m c, inertia about the flange
+    body's origin: xx, yy, zz, xy, xz, yz), in which inverse dynamics is linear. ``flange``:
+    the flange origin in the flange body's frame (the arm's ``flange_pos``)."""
     m = p[0]
-    c = np.array([p[1], p[2], FLANGE_Z + p[3]])
+    c = np.asarray(flange, float) + p[1:4]
     i_com = np.array([[p[4], p[7], p[8]], [p[7], p[5], p[9]], [p[8], p[9], p[6]]])
     i_o = i_com + m * (c @ c * np.eye(3) - np.outer(c, c))  # parallel axes
     return np.r_[m, m * c, i_o[0, 0], i_o[1, 1], i_o[2, 2], i_o[0, 1], i_o[0, 2], i_o[1, 2]]
 
 
-def set_payload(model: mujoco.MjModel, body: int, p: Vec) -> None:
+def set_payload(model: mujoco.MjModel, body: int, p: Vec, flange: Vec = PANDA_FLANGE) -> None:
     model.body_mass[body] = p[0]
-    model.body_ipos[body] = [p[1], p[2], FLANGE_Z + p[3]]
+    model.body_ipos[body] = np.asarray(flange, float) + p[1:4]
     i = np.array([[p[4], p[7], p[8]], [p[7], p[5], p[9]], [p[8], p[9], p[6]]])
     w, axes = np.linalg.eigh(i)
     if np.linalg.det(axes) < 0:
@@ -64,21 +68,21 @@ def load_torque(q: Vec, dq: Vec, ddq: Vec, load: Vec) -> Vec:
     return out
 
 
-def payload_model() -> tuple[ArmDynamics, int]:
-    """The arm with a payload body on link 7 and every other body massless: its inverse
-    dynamics is the payload's torque alone (body set by :func:`set_payload`)."""
-    spec = rigid_arm_spec()
-    body = spec.body(FLANGE_BODY).add_body(name="diagnosis_payload", pos=[0, 0, 0])
+def payload_model(arm: ArmModel = PANDA_ARM) -> tuple[ArmDynamics, int]:
+    """The arm with a payload body on its flange body and every other body massless: its
+    inverse dynamics is the payload's torque alone (body set by :func:`set_payload`)."""
+    spec = arm.make_spec()
+    body = spec.body(arm.flange_body).add_body(name="diagnosis_payload", pos=[0, 0, 0])
     body.mass, body.inertia, body.explicitinertial = 1.0, [1e-6, 1e-6, 1e-6], True
     # an inertial frame off the body frame (position and rotation) at compile time: else
     # MuJoCo marks the body "sameframe" and ignores later edits of body_ipos / body_iquat
-    body.ipos = [0.01, 0.02, FLANGE_Z + 0.03]
+    body.ipos = np.asarray(arm.flange_pos) + [0.01, 0.02, 0.03]
     body.iquat = [0.9, 0.1, 0.2, 0.3]
     model = spec.compile()
     b = model.body("diagnosis_payload").id
     model.body_mass[:] = 0.0
     model.body_inertia[:] = 0.0
-    return ArmDynamics(model), b
+    return ArmDynamics(model, arm), b
 
 
 def link_rate(terms: Terms, tau: Vec) -> Vec:
@@ -100,17 +104,18 @@ class PayloadRegressor:
     mass: Vec
 
     @classmethod
-    def of(cls, terms: Terms) -> PayloadRegressor:
+    def of(cls, terms: Terms, arm: ArmModel = PANDA_ARM) -> PayloadRegressor:
         """Inverse dynamics is linear in the standard parameters, so the torques of 10 payload
         bodies with independent parameter vectors, evaluated at every sample, give it."""
-        dyn, body = payload_model()
+        dyn, body = payload_model(arm)
+        flange = np.asarray(arm.flange_pos, float)
         rng = np.random.default_rng(0)
         phis, link, drive, rate, mass = [], [], [], [], []
         for _ in range(10):
             p = np.r_[rng.uniform(0.5, 2.0), rng.uniform(-0.1, 0.1, 3), rng.uniform(0.0, 0.01, 6)]
             p[4:7] += 0.02  # diagonal-dominant: a positive-definite tensor
-            set_payload(dyn.model, body, p)
-            phis.append(standard_parameters(p))
+            set_payload(dyn.model, body, p, flange)
+            phis.append(standard_parameters(p, flange))
             tau = dyn.link_torque(terms.q_full, terms.dq_full, terms.a_full)
             link.append(terms.rows.link_at(tau))
             drive.append(terms.rows.at(tau))

@@ -28,14 +28,18 @@ from numpy.typing import NDArray
 
 from serpar.errors import IdentificationError
 from serpar.sim import channels as ch
-from serpar.sim.arm import Q_MAX, Q_MIN
 from serpar.sim.recording import Recording
+from serpar.sim.rigid_arm import PANDA_ARM, ArmModel
 
 Vec = NDArray[np.float64]
 
-REQUIRED = ch.Q + ch.TAU_J
-"""Channels the diagnosis needs (dq is optional: velocities come from the encoders; tau_J_d,
-the command, is optional: without it only what the torque sensors show is diagnosed)."""
+DRIVE_PREFIX = "tau_drive"
+"""Drive torque on the joint side, computed from motor current or motor torque [N m]: what the
+motor delivers, friction and rotor inertia inside the drive included (a measured torque, not a
+command)."""
+TORQUES = ("tau_J", DRIVE_PREFIX)
+"""The measured torques; a recording needs one of them (dq is optional: velocities come from
+the encoders; tau_J_d, the command, is optional)."""
 RATE_TOLERANCE = 0.01
 """Largest relative deviation of a sampling interval from 1/sample_rate_hz."""
 Q_MARGIN = 0.2
@@ -67,16 +71,21 @@ class ArmSeries:
     time: Vec
     rate: float
     q: Vec
-    tau_J: Vec
+    tau_J: Vec | None
+    """None: no link-side torque sensors (a drive-torque log)."""
     tau_J_d: Vec | None
-    """None: the recording has no commanded torque (a log of measured torque only)."""
+    """The drive channel: the commanded torque (``drive_measured`` False) or the measured
+    drive torque tau_drive (True); None: neither is in the recording."""
     sigma_q: Vec
     sigma_tau: Vec
     sigma_cmd: Vec
-    """Noise of the delivered torque about the command (the drive's torque ripple)."""
+    """Noise of the drive channel: the drive's torque ripple about the command, or the
+    measured drive torque's own noise."""
     load: Vec | None = None
     """samples x 4: the load the controller was told of (m_load, F_x_Cload1..3), part of the
     nominal model; None when the recording does not log it."""
+    drive_measured: bool = False
+    """The drive channel is a measured drive torque (tau_drive), not a command (tau_J_d)."""
 
 
 def _column(rec: Recording, name: str) -> Vec:
@@ -107,15 +116,42 @@ def _sigmas(rec: Recording, names: tuple[str, ...], default: Vec | None) -> Vec:
     return s
 
 
-def read_arm_series(rec: Recording) -> ArmSeries:
-    """The arm signals of `rec`, or IdentificationError naming what is wrong with them.
-    noise_sigma must give q and tau_J; tau_J_d's (the drive's torque ripple about the
-    command) defaults to tau_J's when the recording does not state it."""
+def _family(rec: Recording, cols: set[str], prefix: str, n: int) -> Vec | None:
+    """The n channels prefix1..n, None when none is in the recording; one line when some are."""
+    names = ch.numbered(prefix, n)
+    present = [c for c in names if c in cols]
+    if not present:
+        return None
+    if len(present) < n:
+        missing = [c for c in names if c not in cols]
+        raise IdentificationError(f"the recording has {', '.join(present)} but not "
+                                  f"{', '.join(missing)}: give {prefix} of all {n} joints or none")
+    return np.column_stack([_column(rec, c) for c in names])
+
+
+def _joint_count(cols: set[str]) -> int:
+    k = 0
+    while f"q{k + 1}" in cols:
+        k += 1
+    return k
+
+
+def read_arm_series(rec: Recording, arm: ArmModel = PANDA_ARM) -> ArmSeries:
+    """The arm signals of `rec` for ``arm``, or IdentificationError naming what is wrong with
+    them. noise_sigma must give q and the measured torques; tau_J_d's (the drive's torque
+    ripple about the command) defaults to tau_J's when the recording does not state it."""
     cols = set(rec.signals.column_names)
-    missing = [c for c in ("time",) + REQUIRED if c not in cols]
+    n = arm.n
+    q_names = ch.numbered("q", n)
+    missing = [c for c in ("time",) + q_names if c not in cols]
     if missing:
-        raise IdentificationError(f"the arm-dynamics diagnosis needs channels {', '.join(missing)}"
-                                  " (libfranka q and tau_J of 7 joints), not in the recording")
+        raise IdentificationError(f"the arm-dynamics diagnosis of {arm.name} ({n} joints) needs "
+                                  f"channels {', '.join(missing)}, not in the recording")
+    if f"q{n + 1}" in cols:
+        raise IdentificationError(f"the recording has {_joint_count(cols)} joints (q1..q"
+                                  f"{_joint_count(cols)}), the robot {arm.name} has {n}"
+                                  + ("" if arm.source != "built-in" else
+                                     "; give the arm's model file with --robot FILE"))
     t = _column(rec, "time")
     if t.size < 3 or np.any(np.diff(t) <= 0):
         bad = int(np.argmax(np.diff(t) <= 0)) + 1 if t.size >= 2 else 0
@@ -127,29 +163,38 @@ def read_arm_series(rec: Recording) -> ArmSeries:
         raise IdentificationError(f"samples are not uniform at {rate:g} Hz (interval {dt[worst]:.6g} s "
                                   f"at row {worst + 1}); put them on the grid with `serpar import "
                                   f"FILE --rate {rate:g}` (jitter and missed ticks repaired, counted)")
-    q = np.column_stack([_column(rec, c) for c in ch.Q])
-    lo, hi = np.asarray(Q_MIN) - Q_MARGIN, np.asarray(Q_MAX) + Q_MARGIN
+    q = np.column_stack([_column(rec, c) for c in q_names])
+    lo, hi = np.asarray(arm.q_min) - Q_MARGIN, np.asarray(arm.q_max) + Q_MARGIN
     outside = np.flatnonzero(np.any((q < lo) | (q > hi), axis=0))
     if outside.size:
         j = int(outside[0])
-        raise IdentificationError(f"q{j + 1} reaches {q[:, j].min():.3g}..{q[:, j].max():.3g}, outside the "
-                                  f"Panda's range {Q_MIN[j]}..{Q_MAX[j]} rad: degrees, or another robot?")
-    tau = np.column_stack([_column(rec, c) for c in ch.TAU_J])
-    present = [c for c in ch.TAU_J_D if c in cols]
-    if present and len(present) < len(ch.TAU_J_D):
-        missing = [c for c in ch.TAU_J_D if c not in cols]
-        raise IdentificationError(f"the command has {', '.join(present)} but not "
-                                  f"{', '.join(missing)}: give tau_J_d of all 7 joints or none")
-    cmd = np.column_stack([_column(rec, c) for c in ch.TAU_J_D]) if present else None
-    sigma_tau = _sigmas(rec, ch.TAU_J, None)
-    for names, sigma in ((ch.TAU_J, sigma_tau), (ch.TAU_J_D, _sigmas(rec, ch.TAU_J_D, sigma_tau))):
-        zero = [n for n, s in zip(names, sigma) if s == 0]
+        raise IdentificationError(f"q{j + 1} reaches {q[:, j].min():.3g}..{q[:, j].max():.3g}, outside "
+                                  f"{arm.name}'s range {arm.q_min[j]:.4g}..{arm.q_max[j]:.4g} rad: "
+                                  "degrees, motor-side angles, or another robot?")
+    tau = _family(rec, cols, "tau_J", n)
+    command = _family(rec, cols, "tau_J_d", n)
+    drive = _family(rec, cols, DRIVE_PREFIX, n)
+    if tau is None and drive is None:
+        raise IdentificationError(f"the arm-dynamics diagnosis needs measured torques: tau_J1..{n}"
+                                  f" (link-side torque sensors) or {DRIVE_PREFIX}1..{n} (drive "
+                                  "torque from motor currents); the recording has neither")
+    if command is not None and drive is not None:
+        raise IdentificationError(f"the recording has both tau_J_d1..{n} (commanded) and "
+                                  f"{DRIVE_PREFIX}1..{n} (measured drive torque); give one of them")
+    measured = drive is not None
+    names_link, names_drive = ch.numbered("tau_J", n), ch.numbered(
+        DRIVE_PREFIX if measured else "tau_J_d", n)
+    sigma_tau = _sigmas(rec, names_link, None) if tau is not None else np.full(n, np.nan)
+    sigma_drive = _sigmas(rec, names_drive, None if measured or tau is None else sigma_tau)
+    for names, sigma in ((names_link, sigma_tau), (names_drive, sigma_drive)):
+        zero = [nm for nm, s in zip(names, sigma) if s == 0]
         if zero:  # the torques' misfit is judged in units of their sigma
             raise IdentificationError(f"noise_sigma of {', '.join(zero)} is 0: the diagnosis "
                                       "judges the torque misfit against it; state the "
                                       "sensor's noise (> 0)")
-    return ArmSeries(t, rate, q, tau, cmd, _sigmas(rec, ch.Q, None), sigma_tau,
-                     _sigmas(rec, ch.TAU_J_D, sigma_tau), _load(rec, cols))
+    return ArmSeries(t, rate, q, tau, drive if measured else command, _sigmas(rec, q_names, None),
+                     sigma_tau, sigma_drive, _load(rec, cols) if arm.is_panda else None,
+                     drive_measured=measured)
 
 
 def _load(rec: Recording, cols: set[str]) -> Vec | None:

@@ -46,7 +46,7 @@ Vec = NDArray[np.float64]
 
 @dataclass(frozen=True, eq=False)
 class Terms:
-    """Per-row quantities (rows x 7 unless noted)."""
+    """Per-row quantities (rows x n joints unless noted)."""
 
     rows: Rows
     time: Vec
@@ -57,12 +57,12 @@ class Terms:
     sigma_drive: Vec
     """Row noise of the nominal model (see :func:`row_sigma`)."""
     measurement_var: Vec
-    """(link, drive) white-noise variance of a row per joint, 2 x 7 [N^2 m^2]."""
+    """(link, drive) white-noise variance of a row per joint, 2 x n [N^2 m^2]."""
     acc_var: Vec
     """Variance of a row's acceleration from encoder quantisation, per joint [rad^2/s^4]."""
     mass_link: Vec
     mass_full: Vec
-    """Nominal inertia at each row (rows x 7 x 7): link side, and with the rotors."""
+    """Nominal inertia at each row (rows x n x n): link side, and with the rotors."""
     q: Vec
     dq: Vec
     ddq: Vec
@@ -72,9 +72,9 @@ class Terms:
     ddq_link: Vec
     """The same, half a sample earlier: when the period-mean torque sensor reads."""
     a_full: Vec
-    """Full-rate acceleration (second difference), samples x 7."""
+    """Full-rate acceleration (second difference), samples x n."""
     q_full: Vec
-    """The recorded angles (samples x 7)."""
+    """The recorded angles (samples x n)."""
     tau_link_model: Vec
     """Windowed nominal link torque (period-mean timing), the torque-sensor gain's regressor."""
     tau_full_model: Vec
@@ -82,13 +82,21 @@ class Terms:
     gravity: Vec
     """g(q) at each row: where the gravity load is high (the "where" table)."""
     dq_full: Vec
-    """Full-rate velocity (samples x 7), for friction regressors windowed per row."""
+    """Full-rate velocity (samples x n), for friction regressors windowed per row."""
     command: BSpline
     """The windowed command mean as a cubic spline over (fractional) sample index: the
     latency effect reads it a delay earlier."""
     rate: float
     has_command: bool = True
-    """False: the recording has no tau_J_d; only the link channel (tau_J) is compared."""
+    """False: the recording has no drive channel; only the link channel (tau_J) is compared."""
+    has_link: bool = True
+    """False: the recording has no link-side torque sensors (tau_J); only the drive channel."""
+    drive_measured: bool = False
+    """The drive channel is a measured drive torque (tau_drive), not the command (tau_J_d)."""
+
+    @property
+    def n(self) -> int:
+        return int(self.q.shape[1])
 
 
 def compute_terms(series: ArmSeries, cfg: SmoothingConfig | None = None,
@@ -102,9 +110,13 @@ def compute_terms(series: ArmSeries, cfg: SmoothingConfig | None = None,
     if series.load is not None:  # the load the controller was told of is nominal, not missing
         known = load_torque(series.q, v, a, series.load)
         model = DynamicsSeries(model.link + known, model.full + known)
-    link = rows.at(series.tau_J) - rows.link_at(model.link)
+    # no link-side sensors: a link channel of zeros that nothing reads
+    tau_j = series.tau_J if series.tau_J is not None else model.link
+    link = rows.at(tau_j) - rows.link_at(model.link)
     if series.tau_J_d is None:  # no command: a drive channel of zeros that nothing reads
         cmd_mean = model.full
+    elif series.drive_measured:  # a measured drive torque is the torque at t_k, not held
+        cmd_mean = series.tau_J_d
     else:
         cmd_mean = np.empty_like(series.tau_J_d)  # continuous mean of the held command at t_k
         cmd_mean[1:] = 0.5 * (series.tau_J_d[1:] + series.tau_J_d[:-1])
@@ -114,7 +126,10 @@ def compute_terms(series: ArmSeries, cfg: SmoothingConfig | None = None,
     m_link, m_full = dyn.mass_link_and_full(q_r)
     g_link, g_cmd, g_acc = noise_gains(rows.kernel, series.rate)
     acc_var = (g_acc * series.sigma_q) ** 2
-    measurement_var = np.vstack([(g_link * series.sigma_tau) ** 2, (g_cmd * series.sigma_cmd) ** 2])
+    if series.drive_measured:
+        g_cmd = g_link
+    sigma_tau = np.nan_to_num(series.sigma_tau, nan=1.0)  # no tau_J: nothing reads its sigma
+    measurement_var = np.vstack([(g_link * sigma_tau) ** 2, (g_cmd * series.sigma_cmd) ** 2])
     sigma_link, sigma_drive = row_sigma(measurement_var, acc_var, m_link, m_full)
     # the windowed command at every sample (symmetric kernel: correlation = convolution)
     windowed = correlate1d(cmd_mean, rows.kernel, axis=0, mode="nearest")
@@ -126,7 +141,8 @@ def compute_terms(series: ArmSeries, cfg: SmoothingConfig | None = None,
                  ddq_link=rows.link_at(a), a_full=a,
                  q_full=series.q, tau_link_model=rows.link_at(model.link),
                  tau_full_model=rows.at(model.full), gravity=dyn.gravity(q_r), dq_full=v,
-                 command=spline, rate=series.rate, has_command=series.tau_J_d is not None)
+                 command=spline, rate=series.rate, has_command=series.tau_J_d is not None,
+                 has_link=series.tau_J is not None, drive_measured=series.drive_measured)
 
 
 def row_sigma(measurement_var: Vec, acc_var: Vec, mass_link: Vec, mass_full: Vec

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from serpar.calibration.arm_static_data import panda_folder_data, static_data, to_recording
 from serpar.calibration.panda_data import SOCKET_FILES, load_panda_folder
+from serpar.diagnosis.arm_dynamics_family import ArmDynamicsConfig
 from serpar.diagnosis.arm_dynamics_family import family_from_recording as dynamics_family
 from serpar.diagnosis.arm_static_family import family_from_data
 from serpar.diagnosis.episode_family import family_from_recording as episode_family
@@ -16,10 +17,13 @@ from serpar.diagnosis.stewart_motion_effects import MOVING_SHARE, moving_share
 from serpar.diagnosis.stewart_motion_family import family_from_recording as motion_family
 from serpar.errors import ConfigError, IdentificationError
 from serpar.kinematics.robot import PANDA, Robot
-from serpar.sim import channels as ch
+from serpar.sim.arm_from_file import arm_from_file
 from serpar.sim.recording import Recording, read_recording
+from serpar.sim.rigid_arm import PANDA_ARM
 
-DYNAMICS_CHANNELS = ch.Q + ch.TAU_J
+ARM_TORQUES = ("tau_J1", "tau_drive1")
+"""A recording with q1 and either of these is an arm time series (the family names whatever
+else of the arm's channels it lacks)."""
 STEWART_PREFIXES = ("leg", "platform_")
 """A recording with any channel starting so is meant for the Stewart family, which then names
 whichever of its channels are missing."""
@@ -60,22 +64,31 @@ def load_notes(rec: Recording) -> list[str]:
     return [str(n) for n in notes] if isinstance(notes, list) else []
 
 
-def family_from_recording(rec: Recording, robot: Robot = PANDA) -> Family:
+def family_from_recording(rec: Recording, robot: Robot = PANDA,
+                          dynamics: ArmDynamicsConfig | None = None) -> Family:
     """The static arm family when the recording has measurements, else the episode family
     for an assembly episode (``serpar run --record``), else the arm-dynamics family when it has
     the arm's joint signals, else a Stewart family when it has Stewart
     leg or platform channels (the motion family when the leg commands change at most samples,
     the rest-hold family otherwise); else one line saying what is needed. ``robot``: the arm
-    of a static recording (another arm than the Panda is refused for every other family)."""
+    of a static or arm-dynamics recording (episodes and the Stewart platform are the Panda
+    cell's); ``dynamics``: the arm-dynamics family's settings (its split)."""
     if rec.measurements is not None and rec.measurements.num_rows > 0:
 
         return family_from_data(static_data(rec, robot))
-    if robot is not PANDA:
-        raise ConfigError(f"--robot {robot.source}: only the static (point/position) diagnosis "
-                          "takes another robot yet; this recording has no measurements table "
-                          "(arm dynamics, episodes and the Stewart platform are the Panda cell's)")
     cols = set(rec.signals.column_names)
-    if rec.signals.num_rows > 0 and set(DYNAMICS_CHANNELS) <= cols:
+    arm_series = (rec.signals.num_rows > 0 and "q1" in cols
+                  and any(c in cols for c in ARM_TORQUES))
+    if robot is not PANDA:
+        if not arm_series or is_episode(rec):
+            raise ConfigError(f"--robot {robot.source}: the static (point/position) and the "
+                              "arm-dynamics diagnosis take another robot; this recording is "
+                              "neither (episodes and the Stewart platform are the Panda cell's)")
+        return dynamics_family(rec, dynamics, arm_from_file(robot.source))
+    if dynamics is not None and (not arm_series or is_episode(rec)):
+        raise ConfigError("--train/--heldout split an arm-dynamics time series; this recording "
+                          "is not one")
+    if arm_series:
 
         if is_episode(rec):
             # --- an assembly episode: arm dynamics over its free-motion phases (episode.py)
@@ -83,7 +96,7 @@ def family_from_recording(rec: Recording, robot: Robot = PANDA) -> Family:
             return episode_family(rec)
         # --- arm dynamics time series (diagnosis/arm_dynamics_family.py, a sibling domain)
 
-        return dynamics_family(rec)
+        return dynamics_family(rec, dynamics, PANDA_ARM)
     if rec.signals.num_rows > 0 and any(c.startswith(STEWART_PREFIXES) for c in cols):
 
         if moving_share(rec) > MOVING_SHARE:

@@ -37,20 +37,27 @@ def _key(where: str, name: str) -> str:
     return f"{where}.{name}" if ": " in where else f"{where}: {name}"
 
 
-def load_yaml_config(cls: type[T], path: str | Path) -> T:
-    """Read a YAML file into dataclass `cls`; a one-line ConfigError on any problem."""
+def read_yaml(path: str | Path, what: str) -> object:
+    """The YAML document of ``path``; a one-line ConfigError naming ``what`` file it is, and
+    the line and column where the YAML is malformed."""
     p = Path(path)
     if not p.is_file():
-        raise ConfigError(f"config file {p} not found")
+        raise ConfigError(f"{what} file {p} not found")
     try:
-        values = yaml.safe_load(p.read_text())
+        return yaml.safe_load(p.read_text())
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        raise ConfigError(f"config file {p} is not valid YAML{where}: {exc.problem or exc.context}") from None
+        raise ConfigError(f"{what} file {p} is not valid YAML{where}: {exc.problem or exc.context}") from None
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else "parse error"
-        raise ConfigError(f"config file {p} is not valid YAML: {first}") from None
+        raise ConfigError(f"{what} file {p} is not valid YAML: {first}") from None
+
+
+def load_yaml_config(cls: type[T], path: str | Path) -> T:
+    """Read a YAML file into dataclass `cls`; a one-line ConfigError on any problem."""
+    p = Path(path)
+    values = read_yaml(p, "config")
     try:
         return from_dict(cls, {} if values is None else values, where=p.name)
     except ConfigError as exc:  # a range check of the dataclass names no file: add it

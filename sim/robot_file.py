@@ -2,10 +2,13 @@
 joints from the world to the flange, its joint limits, and its nominal MD-H(+beta) table
 (:func:`serpar.kinematics.robot.mdh_from_axes` of the compiled joint axes at q = 0).
 
-Meshes are dropped before compiling: the kinematics do not need them, and a URDF's
-``package://`` mesh paths do not resolve outside ROS. Bodies left without mass then get
+The file is read as published (:func:`read_spec`): a URDF that MuJoCo's reader refuses for a
+repeated element is repaired where that is unambiguous (:mod:`serpar.sim.robot_repair`). For
+the kinematics, meshes are dropped before compiling: the kinematics do not need them, and a
+URDF's ``package://`` mesh paths do not resolve outside ROS. Bodies left without mass then get
 MuJoCo's lower bound (``boundmass``) so the model compiles; the masses matter only to the
-nominal gravity torques (:func:`gravity_torques`), never to the kinematics.
+nominal gravity torques (:func:`gravity_torques`), never to the kinematics. The file's masses
+and inertias as they are, for dynamics: :func:`serpar.sim.robot_dynamics.dynamics_model`.
 
 The flange is the first site or body named one of :data:`FLANGE_NAMES`, else the last
 jointed body's frame. The chain is the joints on the path from the world to the flange; joints
@@ -25,6 +28,7 @@ from numpy.typing import NDArray
 
 from serpar.errors import ConfigError
 from serpar.kinematics.robot import PANDA, Robot, mdh_from_axes
+from serpar.sim.robot_repair import repair_urdf
 
 FLANGE_NAMES = ("flange", "tool0", "attachment_site", "ee_site", "end_effector")
 """Names under which a model marks its flange (Franka, ROS-Industrial, MuJoCo Menagerie)."""
@@ -53,16 +57,40 @@ class RobotModel:
         return np.asarray(self.model.jnt_dofadr[list(self.joints)], np.int64)
 
 
-def robot_spec(path: str | Path) -> mujoco.MjSpec:
-    """The model file as an editable spec, meshes removed (module docstring)."""
+def mujoco_error(exc: Exception) -> str:
+    """MuJoCo's message on one line (its second line names the element at fault)."""
+    return "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+
+
+def read_spec(path: str | Path) -> tuple[mujoco.MjSpec, tuple[str, ...]]:
+    """The model file as MuJoCo reads it, and the repairs that made it readable (only for a
+    URDF that MuJoCo refuses for a repeated element; :mod:`serpar.sim.robot_repair`)."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"--robot {path}: no such file; give a URDF or MJCF file ({FORMATS})")
     try:
-        spec = mujoco.MjSpec.from_file(str(path))
+        return mujoco.MjSpec.from_file(str(path)), ()
     except Exception as exc:  # noqa: BLE001 (MuJoCo raises ValueError or its own kinds)
-        raise ConfigError(f"--robot {path}: MuJoCo cannot read it ({str(exc).splitlines()[0]});"
-                          f" give a URDF or MJCF file ({FORMATS})") from None
+        why = mujoco_error(exc)
+    if "repeated element" in why:
+        try:
+            text, repairs = repair_urdf(path)
+            spec = mujoco.MjSpec.from_string(text) if repairs else None
+        except ConfigError:
+            raise
+        except Exception as exc:  # noqa: BLE001
+            why = f"{why}; after repairing the repeats: {mujoco_error(exc)}"
+        else:
+            if spec is not None:  # else a repeat this reader does not repair: MuJoCo's words
+                spec.modelfiledir = f"{path.resolve().parent}/"  # relative meshes, as from_file
+                return spec, repairs
+    raise ConfigError(f"--robot {path}: MuJoCo cannot read it ({why}); give a URDF or MJCF "
+                      f"file ({FORMATS})")
+
+
+def robot_spec(path: str | Path) -> mujoco.MjSpec:
+    """The model file as an editable spec, meshes removed (module docstring)."""
+    spec, _ = read_spec(path)
     spec.compiler.fusestatic = False  # keep a URDF's fixed tool0 link as a body of its own
     for geom in [g for g in spec.geoms if g.type == mujoco.mjtGeom.mjGEOM_MESH]:
         spec.delete(geom)
@@ -78,7 +106,7 @@ def compile_spec(spec: mujoco.MjSpec, path: str | Path) -> mujoco.MjModel:
         return spec.compile()
     except Exception as exc:  # noqa: BLE001
         raise ConfigError(f"--robot {path}: MuJoCo cannot compile it "
-                          f"({str(exc).splitlines()[0]})") from None
+                          f"({mujoco_error(exc)})") from None
 
 
 def _flange(model: mujoco.MjModel) -> tuple[str, int]:

@@ -56,7 +56,7 @@ def test_csv_isolated_bad_sample_is_counted_and_its_tick_filled(tmp_path) -> Non
 
 @pytest.mark.parametrize("text, mapping, match", [
     (_text(), "t=time,nope=q1", "not in"),
-    (_text(), "t=time,j1=q9", "unknown channel"),
+    (_text(), "t=time,j1=q17", "unknown channel"),
     (_text(), "j1=q1", "mapped to time"),
     (_text({2: "0.002,0.002,0.5,7"}), "t=time,j1=q1", "line 4: 4 fields, expected 3"),
     (_text({2: "0.0005,0.002,0.5"}), "t=time,j1=q1", "does not increase"),

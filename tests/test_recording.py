@@ -53,7 +53,7 @@ def test_round_trip_is_equal(tmp_path, fmt):
 
 
 def test_off_schema_is_a_one_line_error(tmp_path):
-    with pytest.raises(RecordingError, match=r"unknown channel\(s\) joint1; valid: time, phase, q1..7"):
+    with pytest.raises(RecordingError, match=r"unknown channel\(s\) joint1; valid: time, phase, q1..16"):
         RecordingMeta(source="sim", sample_rate_hz=1e3, channels=("time", "joint1"))
     with pytest.raises(RecordingError, match="source 'robot'; valid: sim, real"):
         RecordingMeta(source="robot", sample_rate_hz=1e3, channels=("time",))

@@ -205,10 +205,12 @@ def test_diagnose_robot_end_to_end(tmp_path, capsys) -> None:
     assert "ur5e" not in (err := capsys.readouterr().err) and "panda has 7 joints" in err
 
 
-def test_diagnose_robot_refuses_arm_dynamics(tmp_path, capsys) -> None:
+def test_diagnose_robot_names_both_joint_counts(tmp_path, capsys) -> None:
+    """A 7-joint recording diagnosed as the 6-joint UR5e: one line naming both counts."""
     assert main(["twin", "--effect", "none", "--domain", "arm_dynamics", "--seed", "1",
                  "--out", str(tmp_path / "dyn")]) == 0
     capsys.readouterr()
     assert main(["diagnose", str(tmp_path / "dyn"), "--robot", UR5E]) == 2
-    assert "only the static (point/position) diagnosis takes another robot yet" in \
-        capsys.readouterr().err
+    err = capsys.readouterr().err.strip()
+    assert "the recording has 7 joints (q1..q7), the robot ur5e has 6" in err
+    assert "\n" not in err

@@ -62,7 +62,7 @@ established with it, or for it while its candidate is withheld): Stribeck fricti
 and viscous levels; a scale error's mean over the joint's travel, a constant offset."""
 EFFECTS: tuple[str, ...] = ("joint_friction", "link_friction", "payload", "link_inertia",
                             "torque_sensor", "latency", "sensor_timing", "encoder_offset",
-                            "stribeck_friction", "encoder_scale", *OUT_OF_LIBRARY)
+                            "stribeck_friction", "encoder_scale", "armature", *OUT_OF_LIBRARY)
 MAGNITUDE_RANGE: dict[str, tuple[float, float]] = {
     "joint_friction": (0.2, 1.0),
     "link_friction": (0.2, 1.0),
@@ -75,6 +75,7 @@ MAGNITUDE_RANGE: dict[str, tuple[float, float]] = {
     "stribeck_friction": (0.5, 1.0),
     "torque_ripple": (0.15, 0.6),
     "encoder_scale": (0.005, 0.015),
+    "armature": (0.3, 1.0),
 }
 PANDA_VISCOUS: tuple[float, ...] = (0.2, 0.2, 0.2, 0.2, 0.1, 0.1, 0.1)
 """Viscous joint friction of a Panda-class drive at scale 1 [N m s/rad] (order of Gaz et al.)."""
@@ -142,6 +143,25 @@ def _link_inertia(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator) -> 
     body.mass *= 1.0 + scale
     body.fullinertia = [v * (1.0 + scale) for v in body.fullinertia]
     return {f"link{i}": (scale if i == link else 0.0) for i in range(1, N_JOINTS + 1)}
+
+
+ROTOR_JOINTS = (3, 4, 5, 6, 7)
+"""Joints an armature twin adds rotor inertia to: joint 1's and 2's are grouped with the links'
+inertias (the diagnosis computes it: diagnosis/arm_dynamics_grouping.py), so no data could
+name them; a twin that hid them would hide link inertia under another name."""
+
+
+def _armature(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator) -> dict[str, float]:
+    """Rotor inertia the model lacks on :data:`ROTOR_JOINTS`: ``mag`` times the model's own
+    armature, scattered +-50 % per joint (a drive's rotor, reflected through its gear: the
+    nominal 0.1 kg m^2 is the order of a Panda-class drive's)."""
+    out = {}
+    for j, name in enumerate(JOINT_NAMES):
+        joint = spec.joint(name)
+        extra = float(mag * joint.armature * rng.uniform(0.5, 1.5)) if j + 1 in ROTOR_JOINTS else 0.0
+        joint.armature += extra
+        out[f"Ia{j + 1}"] = extra
+    return out
 
 
 def _reality(effect: str, mag: float, rng: np.random.Generator) -> tuple[Reality, dict[str, float]]:
@@ -271,6 +291,8 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int,
         params = _payload(spec, magnitude, effect_rng)
     elif effect == "link_inertia":
         params = _link_inertia(spec, magnitude, effect_rng)
+    elif effect == "armature":
+        params = _armature(spec, magnitude, effect_rng)
     elif effect is not None:
         reality, params = _reality(effect, magnitude, effect_rng)
     run = simulate(_plant(spec), reality, noise, duration, RATE,

@@ -12,12 +12,17 @@ with good rows either side) are excluded, counted and listed in ``meta.model["im
 of them, or more than MAX_BAD_FRACTION, is an error. Columns not mapped are named in a note.
 A time series whose stamps are not uniform is put on the grid (grid.py), the repairs
 counted. Nothing is dropped silently.
+
+With a spec (``--spec F.yaml``, spec.py): ``scale`` and ``joint_map`` after the bad samples are
+excluded and before the plausibility checks (jointmap.py), ``rate`` (decimation) after the
+grid and ``sigma_from_rest`` on the output (resample.py); each conversion noted in
+``meta.model["import"]``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pyarrow as pa
@@ -32,6 +37,9 @@ from serpar.sim.channels import (
     plausible_max,
 )
 from serpar.sim.importers.grid import GridRepair, on_grid
+from serpar.sim.importers.jointmap import joint_side, scale
+from serpar.sim.importers.resample import decimate, rest_sigma
+from serpar.sim.importers.spec import ImportSpec
 from serpar.sim.importers.tables import RawTable
 from serpar.sim.recording import Recording, RecordingError, RecordingMeta, check_channels
 
@@ -62,11 +70,18 @@ class ImportReport:
     """(where, reason) of each excluded sample."""
     grid: GridRepair | None = None
     notes: tuple[str, ...] = ()
+    conversions: tuple[str, ...] = ()
+    """What the spec did, in words (scale, joint map, decimation, sigma)."""
+    spec: dict[str, object] | None = None
+    """The spec and what it did, machine-readable."""
 
     def as_dict(self) -> dict[str, object]:
-        return {"rows_kept": self.rows, "excluded_count": len(self.excluded),
-                "excluded": [{"where": w, "reason": r} for w, r in self.excluded],
-                "grid": self.grid.as_dict() if self.grid else None, "notes": list(self.notes)}
+        out = {"rows_kept": self.rows, "excluded_count": len(self.excluded),
+               "excluded": [{"where": w, "reason": r} for w, r in self.excluded],
+               "grid": self.grid.as_dict() if self.grid else None, "notes": list(self.notes)}
+        if self.spec is not None:
+            out |= {"conversions": list(self.conversions), "spec": self.spec}
+        return out
 
 
 def parse_map(text: str) -> dict[str, str]:
@@ -145,8 +160,10 @@ def _check_scale(arrays: dict[str, NDArray]) -> None:
 def _check_names(mapping: dict[str, str], raw: RawTable, table: str) -> None:
     missing = [c for c in mapping.values() if c not in raw.columns]
     if missing:
+        stems = any(n.endswith(f".{c}") for c in missing for n in raw.columns)
         raise RecordingError(f"column(s) {', '.join(missing)} not in {raw.source}; its columns: "
-                             f"{', '.join(raw.columns)}")
+                             f"{', '.join(raw.columns)}" + (" (with several files a column is "
+                             "<file stem>.<column>)" if stems else ""))
     if table == "signals":
         check_channels(tuple(mapping) if TIME in mapping else (TIME, *mapping))
     else:
@@ -166,9 +183,17 @@ def default_map(raw: RawTable) -> dict[str, str]:
 
 
 def to_recording(raw: RawTable, mapping: dict[str, str] | None, options: ImportOptions,
-                 sigma: dict[str, float] | None = None, extra_model: dict | None = None
-                 ) -> tuple[Recording, ImportReport]:
-    """``raw`` through ``mapping`` ({channel: source column}; None: :func:`default_map`)."""
+                 sigma: dict[str, float] | None = None, extra_model: dict | None = None,
+                 spec: ImportSpec | None = None) -> tuple[Recording, ImportReport]:
+    """``raw`` through ``mapping`` ({channel: source column}; None: :func:`default_map`) and,
+    given one, the spec's conversions."""
+    if spec is not None and options.table != "signals":
+        raise RecordingError("--spec is for time series (--table signals)")
+    if spec is not None and spec.source_rate is not None:
+        if options.rate_hz not in (None, spec.source_rate):
+            raise RecordingError(f"--rate {options.rate_hz:g} and the spec's source_rate "
+                                 f"{spec.source_rate:g} both set the source's rate; give one")
+        options = replace(options, rate_hz=spec.source_rate)
     mapping = expand_map(mapping, list(raw.columns)) if mapping else default_map(raw)
     _check_names(mapping, raw, options.table)
     unmapped = [c for c in raw.columns if c not in mapping.values()]
@@ -182,6 +207,12 @@ def to_recording(raw: RawTable, mapping: dict[str, str] | None, options: ImportO
     _check_bad(raw, bad)
     keep = np.array([i not in bad for i in range(raw.n_rows)])
     arrays = {c: v[keep] for c, v in arrays.items()}
+    renames: dict[str, str] = {}
+    conversions: list[str] = []
+    if spec is not None:  # motor-side values may be far out of range before the joint map
+        arrays, conversions = scale(arrays, mapping, spec)
+        arrays, renames, mapped = joint_side(arrays, spec)
+        conversions += mapped
     _check_scale(arrays)
     excluded = tuple((raw.where(i), bad[i]) for i in sorted(bad))
     if options.table == "measurements":
@@ -192,8 +223,7 @@ def to_recording(raw: RawTable, mapping: dict[str, str] | None, options: ImportO
                 for c, v in arrays.items()}
         return Recording(meta, pa.table({"time": pa.array(np.zeros(0))}), pa.table(cols)), report
     t, arrays, grid = _time(raw, arrays, keep, options)
-    report = ImportReport(int(keep.sum()), excluded, grid, tuple(notes))
-    order = (TIME, *(c for c in mapping if c != TIME))
+    order = (TIME, *(renames.get(c, c) for c in mapping if c != TIME))
     sig = {c: float(s) for c, s in (sigma or {}).items()}
     unknown = sorted(set(sig) - set(order))
     if unknown:
@@ -201,11 +231,36 @@ def to_recording(raw: RawTable, mapping: dict[str, str] | None, options: ImportO
                              f"imported: {', '.join(order)}")
     rate = (grid.rate_hz if grid else options.rate_hz if options.rate_hz
             else 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 1.0)
-    model = {"import": {"source": raw.source, **report.as_dict()}, **(extra_model or {})}
+    done = None
+    if spec is not None:
+        t, arrays, rate, done = _output(t, arrays, rate, sig, spec, conversions)
+    report = ImportReport(int(keep.sum()), excluded, grid, tuple(notes), tuple(conversions),
+                          done)
+    model = {"import": {"source": raw.source, "map": {c: ch for ch, c in mapping.items()},
+                        **report.as_dict()}, **(extra_model or {})}
+    if spec is not None and spec.robot is not None:
+        model["robot"] = spec.robot
     meta = RecordingMeta("real", rate, order, noise_sigma=sig, model=model)
     cols = {TIME: pa.array(t)} | {c: pa.array(list(v)) if c in STRING_CHANNELS else pa.array(v)
                                   for c, v in arrays.items() if c != TIME}
     return Recording(meta, pa.table({c: cols[c] for c in order})), report
+
+
+def _output(t: NDArray[np.float64], arrays: dict[str, NDArray], rate: float,
+            sig: dict[str, float], spec: ImportSpec, conversions: list[str]
+            ) -> tuple[NDArray[np.float64], dict[str, NDArray], float, dict[str, object]]:
+    """The spec's conversions on the grid: decimation to ``rate``, then (on the output's
+    samples) the noise sigma from the rest segment, written into ``sig`` where not given."""
+    t, arrays, rate_out, info = decimate(t, arrays, rate, spec)
+    if info.get("factor", 1) > 1:
+        conversions.append(f"decimated {info['rate_in_hz']:g} Hz -> {rate_out:g} Hz (/"
+                           f"{info['factor']}): {info['filter']}")
+    rest, said, rest_info = rest_sigma(t, arrays, sig, spec)
+    conversions += said
+    sig.update({c: s for c, s in rest.items() if c not in sig})
+    return t, arrays, rate_out, {**spec.as_dict(), "rate_in_hz": rate, "rate_out_hz": rate_out,
+                                 "decimation": info or None,
+                                 "sigma_from_rest": rest_info or None}
 
 
 def _time(raw: RawTable, arrays: dict[str, NDArray], keep: NDArray[np.bool_],

@@ -1,6 +1,7 @@
 """MATLAB .mat files (v4 to v7; scipy.io): every numeric variable of the common length is a
 column (a matrix of k columns is ``<name>.1``..``<name>.k``, samples along its longer side);
-anything else (scalars, text, structs, other lengths) is passed over with a note."""
+anything else (scalars, text, structs, other lengths) is passed over with a note. NumPy .npz
+files (npzfile.py) are read into a table the same way (:func:`numeric_table`)."""
 
 from __future__ import annotations
 
@@ -39,13 +40,18 @@ def read_mat(path: str | Path) -> RawTable:
                              "save(..., '-v7') or export the variables as CSV") from None
     except (ValueError, OSError) as exc:
         raise RecordingError(f"{path} is not a readable .mat file ({exc})") from None
-    found = {k: c for k, v in data.items() if not k.startswith("__")
-             if (c := _columns(k, np.asarray(v))) is not None}
-    notes = [f"{path.name}: variable {k!r} is not a numeric vector or matrix: not imported"
-             for k in data if not k.startswith("__") and k not in found]
+    return numeric_table(path, {k: v for k, v in data.items() if not k.startswith("__")})
+
+
+def numeric_table(path: Path, data: dict[str, object], word: str = "variable") -> RawTable:
+    """Named arrays (a .mat file's variables, a .npz file's arrays) as one table: each numeric
+    vector a column, a matrix ``<name>.1..k``; the rest passed over with a note."""
+    found = {k: c for k, v in data.items() if (c := _columns(k, np.asarray(v))) is not None}
+    notes = [f"{path.name}: {word} {k!r} is not a numeric vector or matrix: not imported"
+             for k in data if k not in found]
     if not found:
-        raise RecordingError(f"{path} holds no numeric vector or matrix; variables: "
-                             f"{', '.join(k for k in data if not k.startswith('__')) or 'none'}")
+        raise RecordingError(f"{path} holds no numeric vector or matrix; {word}s: "
+                             f"{', '.join(data) or 'none'}")
     length = Counter(len(next(iter(c.values()))) for c in found.values()).most_common(1)[0][0]
     columns: dict[str, NDArray] = {}
     for k, c in found.items():
@@ -53,6 +59,6 @@ def read_mat(path: str | Path) -> RawTable:
         if n == length:
             columns.update(c)
         else:
-            notes.append(f"{path.name}: variable {k!r} has {n} samples, the others {length}: "
+            notes.append(f"{path.name}: {word} {k!r} has {n} samples, the others {length}: "
                          "not imported")
     return RawTable(str(path), columns, "row", 1, None, tuple(notes))
