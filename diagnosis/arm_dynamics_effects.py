@@ -34,6 +34,8 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import NDArray
 
+from serpar.diagnosis.arm_dynamics_inertial import NAME as INERTIAL
+from serpar.diagnosis.arm_dynamics_inertial import LinkInertial
 from serpar.diagnosis.arm_dynamics_library import (
     EXTENT_START,
     STICK_VELOCITY,
@@ -79,9 +81,10 @@ class EffectModels:
 
     def __init__(self, terms: Terms, dynamics: ArmDynamics,
                  stick_velocity: float = STICK_VELOCITY, offset_joints: tuple[int, ...] = (),
-                 scale_joints: tuple[int, ...] = (), couplings: tuple[Coupling, ...] = ()
-                 ) -> None:
+                 scale_joints: tuple[int, ...] = (), couplings: tuple[Coupling, ...] = (),
+                 inertial: LinkInertial | None = None) -> None:
         self.terms, self.dyn = terms, dynamics
+        self.inertial = inertial
         self.n = terms.n
         rows = terms.rows
         v = terms.dq_full
@@ -178,6 +181,10 @@ class EffectModels:
         if "link_inertia" in params:
             link += self.inertia_link[rows] @ params["link_inertia"]
             drive += self.inertia_drive[rows] @ params["link_inertia"]
+        if INERTIAL in params and self.inertial is not None:
+            d_link, d_drive = self.inertial.contribution(params[INERTIAL], rows)
+            link += d_link
+            drive += d_drive
         if "payload" in params:
             phi = self._payload(params)
             link += self.payload_link[rows] @ phi
@@ -273,7 +280,7 @@ class EffectModels:
         return (1.0 - w) * self.stribeck[k][rows] + w * self.stribeck[k + 1][rows]
 
 
-LINEAR = ("joint_friction", "link_friction", "armature", "torque_sensor")
+LINEAR = ("joint_friction", "link_friction", "armature", "torque_sensor", INERTIAL)
 """Effects linear in their parameters that leave the rows' sigma alone (a coupled motor's
 block too): their residual columns are exact (:func:`linear_columns`), not differences."""
 
@@ -299,6 +306,12 @@ def linear_columns(models: EffectModels, name: str, params: Mapping[str, Vec],
             link_band[j, :, j] = (models.stuck_link[rows] * sign).T
     elif name == "armature":
         drive[j, :, j] = models.acceleration[rows].T
+    elif name == INERTIAL:
+        if models.inertial is None:
+            return None
+        link, drive = models.inertial.columns_at(rows)
+        if not t.has_link:
+            link = np.zeros_like(drive)
     elif name == "torque_sensor":
         if t.has_link:
             link[j, :, j] = t.tau_link_model[rows].T

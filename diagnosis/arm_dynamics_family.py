@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from serpar.diagnosis.arm_dynamics_effects import STICK_VELOCITY, EffectModels
 from serpar.diagnosis.arm_dynamics_empirical import arm_library
 from serpar.diagnosis.arm_dynamics_grouping import hold_grouped
+from serpar.diagnosis.arm_dynamics_inertial import LinkInertial
 from serpar.diagnosis.arm_dynamics_jacobian import residual_jacobian, tare_columns
 from serpar.diagnosis.arm_dynamics_library import (
     COMMAND_ONLY,
@@ -320,10 +321,14 @@ def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None,
     check_scale(terms, arm.name, drive_name)
     offsets, scales = encoder_visibility(terms, dynamics)
     couplings = declared_couplings(rec, arm.n)
-    models = EffectModels(terms, dynamics, cfg.stick_velocity, offsets, scales, couplings)
+    inertial = None if arm.inertials_identified else LinkInertial(terms, dynamics)
+    models = EffectModels(terms, dynamics, cfg.stick_velocity, offsets, scales, couplings,
+                          inertial)
     drive = (("measured" if terms.drive_measured else "command") if terms.has_command else None)
     effects = arm_effects(arm.n, Channels(terms.has_link, drive), offsets, scales,
                           dynamics.armature, couplings, arm.friction_bounds)
+    if inertial is not None:
+        effects += (inertial.effect,)
     effects, held = hold_grouped(effects, terms, dynamics, couplings)
     phases = tuple((p.name, p.start, p.end) for p in rec.meta.phases)
     family = ArmDynamicsFamily(terms, dynamics, cfg, phases, stated_tare_walk(rec), effects,

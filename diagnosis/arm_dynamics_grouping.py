@@ -67,10 +67,9 @@ def _set(model: mujoco.MjModel, body: int, p: Vec) -> Vec:
     return np.r_[m, m * c, i_o[0, 0], i_o[1, 1], i_o[2, 2], i_o[0, 1], i_o[0, 2], i_o[1, 2]]
 
 
-def link_regressor(terms: Terms, dyn: ArmDynamics, samples: NDArray[np.int64]) -> Vec:
-    """(samples x n) x (10 x links): the torque per standard inertial parameter of every link
-    at the recording's ``samples`` (unwindowed: a window is linear and the same for every
-    column, so it changes no span)."""
+def link_regressor_at(dyn: ArmDynamics, q: Vec, dq: Vec, ddq: Vec) -> Vec:
+    """states x n x (10 x links): the torque per standard inertial parameter of every link
+    (m, m c, inertia about the link frame's origin: xx, yy, zz, xy, xz, yz) at the states."""
     probe, bodies = _probe_model(dyn)
     rng = np.random.default_rng(0)
     cols = []
@@ -80,13 +79,19 @@ def link_regressor(terms: Terms, dyn: ArmDynamics, samples: NDArray[np.int64]) -
             p = np.r_[rng.uniform(0.5, 2.0), rng.uniform(-0.2, 0.2, 3), rng.uniform(0.01, 0.05, 3),
                       rng.uniform(-np.pi, np.pi, 3)]
             phis.append(_set(probe.model, body, p))
-            tau = probe.link_torque(terms.q_full[samples], terms.dq_full[samples],
-                                    terms.a_full[samples])
-            taus.append(tau.reshape(-1))
+            taus.append(probe.link_torque(q, dq, ddq))
         probe.model.body_mass[body] = 0.0
         probe.model.body_inertia[body] = 0.0
-        cols.append(np.column_stack(taus) @ np.linalg.inv(np.array(phis).T))
-    return np.hstack(cols)
+        cols.append(np.stack(taus, axis=2) @ np.linalg.inv(np.array(phis).T))
+    return np.concatenate(cols, axis=2)
+
+
+def link_regressor(terms: Terms, dyn: ArmDynamics, samples: NDArray[np.int64]) -> Vec:
+    """(samples x n) x (10 x links): :func:`link_regressor_at` at the recording's ``samples``
+    (unwindowed: a window is linear and the same for every column, so it changes no span)."""
+    y = link_regressor_at(dyn, terms.q_full[samples], terms.dq_full[samples],
+                          terms.a_full[samples])
+    return y.reshape(-1, y.shape[2])
 
 
 def grouped(columns: Vec, links: Vec) -> NDArray[np.bool_]:

@@ -146,7 +146,8 @@ def arm_effects(n: int, channels: Channels, offset_joints: tuple[int, ...],
                 physical_lower=True))
     out.append(Effect(
         "payload", "unmodelled payload at the flange (mass, centre of mass, extent: the "
-        "Cholesky factor of its second moment of mass, so its inertia is physical)",
+        "Cholesky factor of its second moment of mass, so its inertia is physical; or the last "
+        "link's own mass and inertia off by as much: the same torques)",
         PAYLOAD_PARAMS, ("kg", "m", "m", "m") + ("m",) * 6,
         np.r_[0.1, 0.0, 0.0, 0.05, EXTENT_START],
         np.r_[-3.0, -0.3, -0.3, -0.3, np.where(EXTENT_DIAGONAL, 0.0, -0.3)],

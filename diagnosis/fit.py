@@ -84,6 +84,19 @@ def unpack(blocks: tuple[Effect, ...], x: NDArray[np.float64]) -> dict[str, NDAr
     return out
 
 
+START_INSIDE = 0.01
+"""A new effect's parameter whose x0 sits on a bound (no friction, no delay) starts this share
+of its range inside: scipy's trust region starts as wide as the (scaled) start, and a start
+on zero left a fit with a large residual (a CAD model against a real arm) stopped by ``ftol``
+after one tiny step."""
+
+
+def _inside(effect: Effect) -> NDArray[np.float64]:
+    x0, lo, hi = effect.x0, effect.lower, effect.upper
+    step = START_INSIDE * (hi - lo)
+    return np.where(x0 <= lo, lo + step, np.where(x0 >= hi, hi - step, x0))
+
+
 def fit_model(family: Family, active: tuple[str, ...], train: NDArray[np.int64],
               heldout: NDArray[np.int64],
               start: Mapping[str, NDArray[np.float64]] | None = None,
@@ -93,8 +106,8 @@ def fit_model(family: Family, active: tuple[str, ...], train: NDArray[np.int64],
     ``overrides``: effects with parameters fixed (:meth:`Effect.fix`), by name."""
     blocks = blocks_of(family, active, overrides)
     start = start or {}
-    x0 = np.concatenate([np.clip(start.get(b.name, b.x0), b.lower, b.upper) for b in blocks]
-                        or [np.zeros(0)])
+    x0 = np.concatenate([np.clip(start[b.name], b.lower, b.upper) if b.name in start
+                         else _inside(b) for b in blocks] or [np.zeros(0)])
     lo = np.concatenate([b.lower for b in blocks] or [np.zeros(0)])
     hi = np.concatenate([b.upper for b in blocks] or [np.zeros(0)])
     # parameters held at zero (Effect.fix) are left out of the search, not boxed in

@@ -72,6 +72,11 @@ class ArmModel:
     q_max: tuple[float, ...]
     notes: tuple[str, ...] = ()
     """What reading the file repaired, one line each (body and value named)."""
+    inertials_identified: bool = False
+    """The file's link masses, centres of mass and inertias were identified on this arm (the
+    Panda's: Gaz et al. 2019), not taken from CAD: a diagnosis then looks for their scale
+    errors only (``link_inertia``), not for every base inertial parameter (``link_inertial``),
+    whose dozens of parameters a CAD model needs."""
     friction_bounds: tuple[float, float] = (10.0, 5.0)
     """Largest joint friction searched: Coulomb [N m], viscous [N m s/rad]. The Panda's
     drives: 10 and 5; an arm from a file: from its joints' torque limits
@@ -93,7 +98,8 @@ class ArmModel:
 
 
 PANDA_ARM = ArmModel("the Panda", "built-in", rigid_arm_spec, JOINT_NAMES, LINK_BODIES, FLANGE_BODY,
-                     (0.0, 0.0, FLANGE_Z), tuple(map(float, Q_MIN)), tuple(map(float, Q_MAX)))
+                     (0.0, 0.0, FLANGE_Z), tuple(map(float, Q_MIN)), tuple(map(float, Q_MAX)),
+                     inertials_identified=True)
 """serpar's own arm, the default of every arm-dynamics command."""
 
 
