@@ -104,6 +104,13 @@ class EffectModels:
         # rotor inertia: the windowed acceleration, as the nominal armature term enters
         self.acceleration = rows.at(terms.a_full)
         self.couplings = couplings
+        # a coupled motor turns with both its joints: its Coulomb sign is that of their sum
+        self.motor_sign, self.motor_stuck = {}, {}
+        for c in couplings:
+            speed = v[:, c.joint - 1] + v[:, c.motor - 1]
+            turning = np.abs(speed) >= stick_velocity
+            self.motor_sign[c] = rows.at(np.sign(speed) * turning)
+            self.motor_stuck[c] = rows.at((~turning).astype(float))
         # rows x joint x link, for the link channel (sensor timing) and the drive channel
         self.inertia_link, self.inertia_drive = self._per_link()
         self.base_link = dynamics.link_torque(terms.q_link, terms.dq_link, terms.ddq_link)
@@ -175,9 +182,13 @@ class EffectModels:
             drive += self.acceleration[rows] * params["armature"]
         for name, c in self._coupled(params):
             p, m, j = params[name], c.motor - 1, c.joint - 1
-            drive[:, j] += (p[0] * self.acceleration[rows, m] + p[1] * self.viscous[rows, m]
-                            + p[2] * self.coulomb[rows, m])
-            band[:, j] += self.stuck[rows, m] * abs(p[2])
+            # each joint's drive takes the motor's inertia and viscous friction in the other
+            # joint's motion (its own are the joint's Ia, Fv), and its Coulomb friction
+            for here, other in ((j, m), (m, j)):
+                drive[:, here] += (p[0] * self.acceleration[rows, other]
+                                   + p[1] * self.viscous[rows, other]
+                                   + p[2] * self.motor_sign[c][rows])
+                band[:, here] += self.motor_stuck[c][rows] * abs(p[2])
         if "link_inertia" in params:
             link += self.inertia_link[rows] @ params["link_inertia"]
             drive += self.inertia_drive[rows] @ params["link_inertia"]
@@ -322,8 +333,9 @@ def linear_columns(models: EffectModels, name: str, params: Mapping[str, Vec],
         if coupling is None:
             return None
         a, m = coupling.joint - 1, coupling.motor - 1
-        drive[0, :, a] = models.acceleration[rows, m]
-        drive[1, :, a] = models.viscous[rows, m]
-        drive[2, :, a] = models.coulomb[rows, m]
-        band[2, :, a] = models.stuck[rows, m] * np.sign(p[2])
+        for here, other in ((a, m), (m, a)):
+            drive[0, :, here] = models.acceleration[rows, other]
+            drive[1, :, here] = models.viscous[rows, other]
+            drive[2, :, here] = models.motor_sign[coupling][rows]
+            band[2, :, here] = models.motor_stuck[coupling][rows] * np.sign(p[2])
     return link, drive, link_band, band

@@ -133,7 +133,11 @@ def hold_grouped(effects: tuple[Effect, ...], terms: Terms, dyn: ArmDynamics,
         return effects, ()
     samples = np.unique(np.linspace(2, len(terms.q_full) - 3, SAMPLES).astype(np.int64))
     links = link_regressor(terms, dyn, samples)
-    columns = np.column_stack([rotor_columns(terms, samples, j, m) for _, _, j, m in targets])
+    # a coupled motor's inertia: each of its joints with the other's acceleration
+    columns = np.column_stack([rotor_columns(terms, samples, j, m) if j == m else
+                               rotor_columns(terms, samples, j, m)
+                               + rotor_columns(terms, samples, m, j)
+                               for _, _, j, m in targets])
     held = grouped(columns, links)
     out = list(effects)
     named = []

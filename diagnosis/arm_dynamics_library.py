@@ -81,9 +81,11 @@ class Channels:
 @dataclass(frozen=True)
 class Coupling:
     """One motor that turns two joints (a coupled wrist): the motor of joint ``motor`` also
-    turns joint ``joint``, and its own friction and rotor inertia load that joint's drive with
-    the motor joint's motion (the published TX40 structure: fvm6, fsm6, Iam6 on joint 5 with
-    joint 6's velocity, its sign and its acceleration). 1-based joints."""
+    turns joint ``joint``, so it spins with their sum and its torque reaches both. Beyond each
+    joint's own rotor inertia and friction (Ia, Fv of its own motion), each joint's drive takes
+    the motor's inertia and viscous friction in the *other* joint's motion and its Coulomb
+    friction with the sign of the sum (the published TX40 structure, FIGAROH's
+    ``_add_coupling``: Iam6, fvm6, fsm6 on joints 5 and 6). 1-based joints."""
 
     joint: int
     motor: int
@@ -138,8 +140,9 @@ def arm_effects(n: int, channels: Channels, offset_joints: tuple[int, ...],
             m = c.motor
             out.append(Effect(
                 "coupled_pair" if len(couplings) == 1 else f"coupled_pair{c.joint}{m}",
-                f"motor {m} also turns joint {c.joint} (coupled drive): the motor's own rotor "
-                f"inertia and friction load joint {c.joint}'s drive with joint {m}'s motion",
+                f"motor {m} also turns joint {c.joint} (coupled drive): its rotor inertia and "
+                f"friction load both joints' drives with the other's motion, its dry friction "
+                f"with the sign of their sum",
                 (f"Iam{m}", f"fvm{m}", f"fsm{m}"), ("kg m^2", "N m s/rad", "N m"),
                 np.zeros(3), np.zeros(3),
                 np.array([ARMATURE_MAX, friction_bounds[1], friction_bounds[0]]),

@@ -110,7 +110,7 @@ def encoder_visibility(terms: Terms, dynamics: ArmDynamics) -> tuple[tuple[int, 
 
 def declared_couplings(rec: Recording, n: int) -> tuple[Coupling, ...]:
     """Coupled drives the recording declares: the torque map of its import (``serpar import
-    --spec``'s ``joint_map``, meta.model["import"]) with an off-diagonal entry T[a, m] (motor m
+    --spec``'s ``joint_map``, meta.model["import"]["spec"]) with an off-diagonal entry T[a, m] (motor m
     also drives joint a), or an explicit ``meta.model["couplings"]`` list of [joint, motor]
     pairs (1-based; a twin's)."""
     model = rec.meta.model if isinstance(rec.meta.model, dict) else {}
@@ -119,7 +119,8 @@ def declared_couplings(rec: Recording, n: int) -> tuple[Coupling, ...]:
     if isinstance(explicit, list):
         pairs += [(int(a), int(m)) for a, m in explicit]
     imported = model.get("import")
-    jm = imported.get("joint_map") if isinstance(imported, dict) else None
+    spec = imported.get("spec") if isinstance(imported, dict) else None
+    jm = spec.get("joint_map") if isinstance(spec, dict) else None
     torque = jm.get("torque_matrix") if isinstance(jm, dict) else None
     if torque is not None:
         t = np.asarray(torque, float)

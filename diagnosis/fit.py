@@ -93,7 +93,8 @@ after one tiny step."""
 
 def _inside(effect: Effect) -> NDArray[np.float64]:
     x0, lo, hi = effect.x0, effect.lower, effect.upper
-    step = START_INSIDE * (hi - lo)
+    with np.errstate(invalid="ignore"):  # an unbounded side is never the start's
+        step = START_INSIDE * np.where(np.isfinite(hi - lo), hi - lo, 0.0)
     return np.where(x0 <= lo, lo + step, np.where(x0 >= hi, hi - step, x0))
 
 
