@@ -75,3 +75,39 @@ def stage(text: str) -> Iterator[None]:
         what = "\r " if tty else text.split(" (")[0] + ":"  # a log line names its step
         err.write(f"{what} {ended} {time.perf_counter() - t0:.1f} s\n")
         err.flush()
+
+
+class StageLines:
+    """Progress of a run made of named stages (a diagnosis: each candidate, each fold) on
+    stderr, always (also with --json, whose object stays on stdout): one line per stage with
+    the elapsed time, and a line repeating the current stage whenever ``every_s`` pass without
+    one, so a user sees the run is alive."""
+
+    def __init__(self, prefix: str, every_s: float = 30.0) -> None:
+        self.prefix, self.every_s = prefix, every_s
+        self.t0 = time.perf_counter()
+        self.last, self.current = self.t0, "starting"
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._beat = threading.Thread(target=self._heartbeat, daemon=True)
+        self._beat.start()
+
+    def _write(self, text: str) -> None:
+        with self._lock:
+            now = time.perf_counter()
+            sys.stderr.write(f"{self.prefix} [{now - self.t0:6.1f} s] {text}\n")
+            sys.stderr.flush()
+            self.last = now
+
+    def __call__(self, text: str) -> None:
+        self.current = text
+        self._write(text)
+
+    def _heartbeat(self) -> None:
+        while not self._stop.wait(1.0):
+            if time.perf_counter() - self.last >= self.every_s:
+                self._write(f"still: {self.current}")
+
+    def close(self) -> None:
+        self._stop.set()
+        self._write("done")

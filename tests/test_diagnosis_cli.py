@@ -23,8 +23,13 @@ def test_twin_then_diagnose_with_report(tmp_path, capsys) -> None:
     capsys.readouterr()
     report = tmp_path / "r.html"
     assert main(["diagnose", str(out), "--json", "--report", str(report)]) == 0
-    result = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    result = json.loads(captured.out)
     assert result["top_effect"] == "thermal_drift"
+    # progress on stderr also with --json: a line per stage with its elapsed time, then done
+    stages = [line for line in captured.err.splitlines() if line.startswith("diagnose [")]
+    assert stages[0].endswith("baseline") and stages[-1].endswith("done"), captured.err
+    assert any(line.endswith("thermal_drift") for line in stages)
     text = report.read_text()  # where, held-out whitened, and the fit in mm: traces, residuals
     assert text.count("data:image/png;base64") == 4 and "Held-out fit in physical units" in text
     model = json.loads(Path(result["model_file"]).read_text())
