@@ -7,9 +7,9 @@ import argparse
 from pathlib import Path
 
 from serpar.cli import arg_types
-from serpar.cli.cmd_export_mjcf import export_summary, print_export
+from serpar.cli.cmd_export_mjcf import export_summary, print_export, print_urdf, urdf_summary
 from serpar.cli.out_paths import add_force, out_file, out_files
-from serpar.cli.output import print_json, progress, table
+from serpar.cli.output import StageLines, print_json, table
 from serpar.cli.robot_option import add_robot_option
 from serpar.diagnosis.arm_dynamics_family import ArmDynamicsConfig
 from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis, load_notes
@@ -18,10 +18,11 @@ from serpar.diagnosis.prior import PriorFamily
 from serpar.diagnosis.report_html import write_report
 from serpar.diagnosis.select import diagnose
 from serpar.errors import ConfigError
-from serpar.sim.mjcf_export import export_arm_mjcf, read_any_model
+from serpar.sim.mjcf_export import export_mjcf, read_any_model
 from serpar.sim.model_file import parse_model
 from serpar.sim.plants.from_model_file import KNOWN_EFFECTS, applied_parts, arm_plant_changes
 from serpar.sim.robot_file import load_robot
+from serpar.sim.urdf_export import export_urdf, require_urdf
 
 
 def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -35,7 +36,11 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "for serpar run's stewart_calibration); existing files are refused unless --force")
     p.add_argument("--mjcf", metavar="OUT.xml",
                    help="also write the updated arm as one MJCF (established effects, full "
-                        "precision; serpar export-mjcf writes it from a model file)")
+                        "precision; serpar export-mjcf writes it from a model file): serpar's "
+                        "Panda, or the --robot arm")
+    p.add_argument("--urdf", metavar="OUT.urdf",
+                   help="also write the --robot URDF with each joint's <dynamics> friction and "
+                        "damping from the established friction")
     add_force(p)
     p.add_argument("--model", metavar="M.model.json|M.xml|CELL.yaml",
                    help="diagnose against a previous diagnosis's model file (or its MJCF "
@@ -94,7 +99,6 @@ def plant_summary(model: dict) -> dict[str, list[str]] | None:  # type: ignore[t
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
     import dataclasses
-    import sys
 
 
     if args.report:  # before any work: the report, its model file and a Stewart parameter file
@@ -102,10 +106,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         out_files([report, *(report.with_name(report.stem + s) for s in (".model.json", ".stewart_params.json"))],
                   "--report", args.force)
     mjcf = out_file(args.mjcf, "--mjcf", args.force, suffix=".xml") if args.mjcf else None
+    urdf = out_file(args.urdf, "--urdf", args.force, suffix=".urdf") if args.urdf else None
     robot = load_robot(getattr(args, "robot", None))
-    if mjcf is not None and robot.source != "built-in":
-        raise ConfigError(f"--mjcf writes serpar's Panda arm; this is a diagnosis of "
-                          f"{robot.label} ({robot.source})")
+    if urdf is not None:  # before any work: a URDF to write back
+        require_urdf(robot.source)
     rec = load_for_diagnosis(args.recording, robot)
     train, heldout = getattr(args, "train", None), getattr(args, "heldout", None)
     if (train is None) != (heldout is None):
@@ -119,27 +123,27 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
         read = model_from_episode_config if is_config_path(args.model) else read_any_model
         family = prior = PriorFamily(family, read(args.model))
-    bar = progress(total=0, desc="diagnose", enabled=sys.stderr.isatty() and not args.json)
-
-    def step(msg: str) -> None:
-        bar.set_postfix_str(msg)
-        bar.update(1)
-
-    diag = diagnose(family, args.seed, report=step)
-    bar.close()
+    step = StageLines("diagnose")  # one line per stage on stderr, always
+    try:
+        diag = diagnose(family, args.seed, report=step)
+    finally:
+        step.close()
     if prior is not None:  # the written model: M's effects, corrected, plus the new ones
         diag = dataclasses.replace(diag, model=prior.combined_model(diag.model))
     plant = plant_summary({"source": str(args.recording), **diag.model})
     if robot.source != "built-in":  # serpar run's cell holds the Panda, not this arm
         why = f"a model of {robot.label}: serpar run's cell has the Panda"
         plant = {"applied": [], "not_applied": [why]}
-    paths, exported = None, None
+    paths, exported, urdf_written = None, None, None
     if args.report:
 
         paths = write_report(diag, Path(args.report), str(args.recording), family)
-    if mjcf is not None:
-        exported = export_arm_mjcf(parse_model(diag.model_file(str(args.recording)), "the model"),
-                                   mjcf)
+    if mjcf is not None or urdf is not None:
+        written_model = parse_model(diag.model_file(str(args.recording)), "the model")
+        if mjcf is not None:
+            exported = export_mjcf(written_model, mjcf, robot.source)
+        if urdf is not None:
+            urdf_written = export_urdf(written_model, robot.source, urdf)
     if args.json:
         out = diag.as_dict()
         if paths:
@@ -149,6 +153,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             out["prior_model"], out["fixed_effects"] = args.model, list(prior.fixed)
         out["plant"] = plant
         out["mjcf"] = None if exported is None else export_summary(exported)
+        out["urdf"] = None if urdf_written is None else urdf_summary(urdf_written)
         out["notes"] = notes
         if getattr(args, "robot", None):
             out["robot"] = {"name": robot.name, "source": robot.source}
@@ -169,4 +174,6 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
                   + "".join(f"\n  warning: {n}" for n in plant["not_applied"]))
         if exported is not None:
             print_export(exported)
+        if urdf_written is not None:
+            print_urdf(urdf_written)
     return 0

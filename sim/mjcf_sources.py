@@ -12,6 +12,7 @@ takes the first candidate that prints as to_xml's 6 digits.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
@@ -28,7 +29,9 @@ PREFIX = {"body": "body", "geom": "geom", "site": "site", "camera": "cam", "ligh
 ALIAS = {"solreflimit": "solref_limit", "solimplimit": "solimp_limit",
          "solreffriction": "solref_friction", "solimpfriction": "solimp_friction",
          "actuatorfrcrange": "actfrcrange", "fluidcoef": "fluid_coefs", "user": "userdata",
-         "diaginertia": "inertia", "polycoef": "data", "anchor": "data"}
+         "diaginertia": "inertia", "polycoef": "data", "anchor": "data", "vertex": "uservert",
+         "normal": "usernormal", "texcoord": "usertexcoord", "face": "userface",
+         "elevation": "userdata"}
 """XML attribute -> spec attribute, where the names differ."""
 INERTIAL_ALIAS = {"pos": "ipos", "quat": "iquat", "diaginertia": "inertia"}
 
@@ -90,7 +93,7 @@ SECTION_KINDS = {"actuator": "actuator", "sensor": "sensor", "tendon": "tendon",
 ASSET_KINDS = ("mesh", "material", "texture", "hfield")
 
 
-@dataclass
+@dataclass(frozen=True)
 class ElementSources:
     """The full-precision values one XML element's numbers may come from."""
 
@@ -109,6 +112,9 @@ class ElementSources:
     the mesh's own offset, a few ulps off what was authored; the authored pos/quat are what
     compiles to the model again, so they are taken if they agree to to_xml's digits."""
 
+    fixed: dict[str, Arr] | None = None
+    """Values known by position alone (a tendon's wraps): the only candidates."""
+
     def loose(self, attr: str) -> bool:
         return self.mesh_frame and attr in ("pos", "quat")
 
@@ -120,11 +126,10 @@ class ElementSources:
         special = COMPILED.get(self.kind, {})
         if attr in special:
             return special[attr](self.model, self.id)
+        if self.kind == "option":
+            return getattr(self.model.opt, attr, None)
         values = getattr(self.model, f"{PREFIX.get(self.kind, self.kind)}_{attr}", None)
-        if values is None and self.kind == "option":
-            values = getattr(self.model.opt, attr, None)
-            return values
-        return None if not isinstance(values, np.ndarray) else values[self.id]
+        return values[self.id] if isinstance(values, np.ndarray) else None
 
     def _authored(self, attr: str) -> object:
         if self.authored is None:
@@ -136,23 +141,43 @@ class ElementSources:
         return value
 
     def candidates(self, attr: str) -> Iterator[Arr]:
-        found = [self._compiled(attr), self._authored(attr)]
+        if self.fixed is not None:
+            found = [self.fixed.get(attr)]
+        else:
+            found = [self._compiled(attr), self._authored(attr)]
         if attr == "quat" and self.orientation is not None:
             found.insert(1, self.orientation)
         for value in found:
             if value is None or callable(value):
                 continue
             try:
-                arr = np.atleast_1d(np.asarray(value, float)).ravel()
+                arr = np.atleast_1d(np.asarray(value)).ravel()
+                arr = arr if arr.dtype == np.float32 else arr.astype(float)  # float32 kept
             except (TypeError, ValueError):
                 continue
             yield arr
 
 
+def _unit(q: list[float]) -> Arr:
+    """``q`` normalised as MuJoCo's compiler does (mjuu_normvec: the same operations in the
+    same order, and a vector within 1e-14 of unit length left as it is)."""
+    norm = 0.0
+    for v in q:
+        norm += v * v
+    norm = math.sqrt(norm)
+    if norm < 1e-14 or abs(norm - 1.0) <= 1e-14:
+        return np.array(q)
+    return np.array([v / norm for v in q])
+
+
 def _resolved(spec: mujoco.MjSpec, el: object) -> Arr | None:
+    """The orientation the compiler makes of what was authored (a frame's has no compiled
+    field to take it from): a quat normalised, any other form resolved."""
     alt = getattr(el, "alt", None)
-    if alt is None or alt.type == mujoco.mjtOrientation.mjORIENTATION_QUAT:
+    if alt is None:
         return None
+    if alt.type == mujoco.mjtOrientation.mjORIENTATION_QUAT:
+        return _unit([float(v) for v in el.quat])
     return np.asarray(spec.resolve_orientation(bool(spec.compiler.degree),
                                                spec.compiler.eulerseq, alt), float)
 
@@ -204,17 +229,8 @@ def _tendon_wraps(el: object, t: int, model: mujoco.MjModel
     adr = int(model.tendon_adr[t])
     for k, wrap in enumerate(w for w in el if isinstance(w.tag, str)):
         prm = model.wrap_prm[adr + k:adr + k + 1]
-        yield wrap, _Fixed(f"{el.get('name')} wrap {k}", {"coef": prm, "divisor": prm})
-
-
-class _Fixed(ElementSources):
-    def __init__(self, label: str, values: dict[str, Arr]) -> None:
-        super().__init__(label)
-        self.values = values
-
-    def candidates(self, attr: str) -> Iterator[Arr]:
-        if attr in self.values:
-            yield np.asarray(self.values[attr], float).ravel()
+        yield wrap, ElementSources(f"{el.get('name')} wrap {k}",
+                                   fixed={"coef": prm, "divisor": prm})
 
 
 def sources_of(root: object, spec: mujoco.MjSpec, model: mujoco.MjModel

@@ -3,8 +3,8 @@ equals the in-memory model's (:func:`round_trip`: max |diff| 0), loadable by pla
 ``mujoco.MjModel.from_xml_path`` from any directory.
 
 ``MjSpec.to_xml`` gets the structure right (defaults, assets, the tree, sections) but writes
-every number with 6 significant digits (C++ stream precision), and writes what compiling made
-of the element rather than what was authored: a capsule's ``fromto`` as pos/quat/size, an
+every number with 6 significant digits (C++ stream precision; one within 1e-12 of an integer as
+that integer), and writes what compiling made of the element rather than what was authored: a capsule's ``fromto`` as pos/quat/size, an
 axis-angle or Euler orientation as a normalised quat, ``fullinertia`` as the principal frame
 (quat + diaginertia), angles in radians. Read back, those 6 digits move the model (serpar's
 Panda: subtree masses by 1.4e-5 kg; a UR5e: ``dof_invweight0`` by 3.5e-3). Here to_xml's tree
@@ -32,6 +32,7 @@ import mujoco
 import numpy as np
 
 from serpar.errors import ConfigError
+from serpar.sim.mjcf_notes import Where, annotate, header
 from serpar.sim.mjcf_sources import ElementSources, sources_of
 
 TMP = "serpar_tmp_"
@@ -40,6 +41,21 @@ NAMED_KINDS = ("bodies", "joints", "geoms", "sites", "cameras", "lights", "frame
                "sensors", "tendons", "equalities", "keys", "pairs", "excludes")
 FILE_ASSETS = ("mesh", "texture", "hfield", "skin")
 INT_MAX = 2**31 - 1
+
+
+@dataclass(frozen=True)
+class MjcfExport:
+    path: Path
+    applied: tuple[str, ...]
+    """Effects written into the file."""
+    not_expressed: tuple[str, ...]
+    """One line per effect (or part) MuJoCo cannot express, with why (also in the header)."""
+    round_trip_max: float
+    """Largest difference of any compiled field, file against in-memory model (0: exact)."""
+    round_trip_field: str
+    """Where that difference is ("" when exact)."""
+    kept: tuple[str, ...] = ()
+    """Numbers left at to_xml's 6 digits (:attr:`PreciseTree.kept`)."""
 
 
 @dataclass(frozen=True)
@@ -56,8 +72,18 @@ def number(v: float) -> str:
     return repr(float(v)).removesuffix(".0")
 
 
+def _number32(v: np.float32) -> str:
+    """A single-precision value (a colour, a material's specular) as its shortest text, where
+    that text read as a double and rounded to single is ``v`` again (as MuJoCo reads it)."""
+    text = str(v)
+    return text.removesuffix(".0") if np.float32(float(text)) == v else number(float(v))
+
+
 def numbers(values: object) -> str:
-    return " ".join(number(v) for v in np.atleast_1d(np.asarray(values, float)).ravel())
+    arr = np.atleast_1d(np.asarray(values)).ravel()
+    if arr.dtype == np.float32:
+        return " ".join(_number32(v) for v in arr)
+    return " ".join(number(v) for v in arr.astype(float))
 
 
 def _floats(text: str) -> list[float] | None:
@@ -78,12 +104,12 @@ def _as_written(v: float) -> float:
 
 def _prints_as(candidate: np.ndarray, written: list[float], loose: bool = False) -> bool:
     """Whether ``candidate`` printed as to_xml prints reads as ``written``: the check that a
-    value belongs to the attribute it replaces (``loose``: to 1e-9, for what to_xml derived
+    value belongs to the attribute it replaces (``loose``: to its 6 digits and 1e-9, for what to_xml derived
     with rounding errors of its own)."""
     if candidate.size < len(written):
         return False
     if loose:
-        return bool(np.allclose(candidate[:len(written)], written, rtol=1e-6, atol=1e-9))
+        return bool(np.allclose(candidate[:len(written)], written, rtol=1e-5, atol=1e-9))
     return all(_as_written(float(c)) == w for c, w in zip(candidate[:len(written)], written))
 
 
@@ -161,6 +187,9 @@ def precise_tree(spec: mujoco.MjSpec, out_dir: Path | None = None) -> PreciseTre
     for el in root.iter():
         if el.get("name", "").startswith(TMP):
             del el.attrib["name"]
+    for el in root.iterfind("custom/text"):  # to_xml's CDATA, which ElementTree cannot keep
+        el.set("data", el.text or "")
+        el.text = None
     _resolve_files(root, spec, out_dir)
     return PreciseTree(root, model, tuple(kept))
 
@@ -171,22 +200,51 @@ def mjcf_text(root: ET.Element, header: str = "") -> str:
     return header + ET.tostring(root, encoding="unicode") + "\n"
 
 
+def differences(a: mujoco.MjModel, b: mujoco.MjModel, ignore: tuple[str, ...] = ()
+                ) -> dict[str, tuple[float, tuple[int, ...]]]:
+    """Per numeric field of two compiled models that differs, the largest absolute
+    difference and the rows (first index) it differs in; a field whose shape differs, inf and
+    no rows. Fields starting with one of ``ignore`` are not compared."""
+    out: dict[str, tuple[float, tuple[int, ...]]] = {}
+    for attr in dir(a):
+        if ignore and attr.startswith(ignore):
+            continue
+        x = getattr(a, attr, None)
+        if not isinstance(x, np.ndarray) or x.dtype.kind not in "fiu" or not x.size:
+            continue
+        y = getattr(b, attr)
+        if x.shape != y.shape:
+            out[attr] = (float("inf"), ())
+            continue
+        diff = np.abs(x.astype(float) - y.astype(float)).reshape(len(x), -1).max(axis=1)
+        if diff.max() > 0:
+            out[attr] = (float(diff.max()), tuple(int(r) for r in np.flatnonzero(diff)))
+    return out
+
+
 def round_trip(expected: mujoco.MjSpec | mujoco.MjModel, path: Path) -> tuple[float, str]:
     """Largest absolute difference over every numeric field of the two compiled models (the
     in-memory one and the file's, read by plain MuJoCo), and the field it is in ("" when
     they are equal)."""
     a = expected.compile() if isinstance(expected, mujoco.MjSpec) else expected
-    b = mujoco.MjModel.from_xml_path(str(path))
-    worst, worst_field = 0.0, ""
-    for attr in dir(a):
-        x = getattr(a, attr, None)
-        if not isinstance(x, np.ndarray) or x.dtype.kind not in "fiu":
-            continue
-        y = getattr(b, attr)
-        if x.shape != y.shape:
-            raise ConfigError(f"{path}: round trip changed {attr}'s shape {x.shape} -> {y.shape}")
-        if x.size:
-            diff = float(np.max(np.abs(x.astype(float) - y.astype(float))))
-            if diff > worst:
-                worst, worst_field = diff, attr
-    return worst, worst_field
+    found = differences(a, mujoco.MjModel.from_xml_path(str(path)))
+    for attr, (diff, rows) in found.items():
+        if not rows:
+            raise ConfigError(f"{path}: round trip changed {attr}'s shape")
+    if not found:
+        return 0.0, ""
+    field = max(found, key=lambda k: found[k][0])
+    return found[field][0], field
+
+
+def write_export(spec: mujoco.MjSpec, out: str | Path, lines: list[str],
+                 notes: dict[Where, list[str]], applied: tuple[str, ...],
+                 not_expressed: tuple[str, ...]) -> MjcfExport:
+    """Write ``spec`` at ``out`` at full precision, the header ``lines`` first and the
+    ``notes`` beside their elements; the round trip against the in-memory model."""
+    path = Path(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tree = precise_tree(spec, path.parent)
+    annotate(tree.root, notes)
+    path.write_text(mjcf_text(tree.root, header(lines)))
+    return MjcfExport(path, applied, not_expressed, *round_trip(tree.model, path), tree.kept)

@@ -123,3 +123,22 @@ def published_copy(dest: Path, drop: tuple[str, ...] = ()) -> tuple[Path, tuple[
         else:
             (root / extra).write_text("0.1,0.2,0.3\n" if extra.endswith(".csv") else "notes\n")
     return root, extras
+
+
+def static_position_recording(robot_file: str, folder: Path) -> Path:
+    """A simulated static position campaign (60 train, 40 verify poses) of the arm of
+    ``robot_file``, written as a recording in ``folder``."""
+    from serpar.calibration.arm_static_data import StaticArmData, to_recording
+    from serpar.sim.plants.static_arm import GeometricCampaignConfig, run_geometric_campaign
+    from serpar.sim.recording import write_recording
+    from serpar.sim.robot_file import load_robot
+
+    robot = load_robot(robot_file)
+    cfg = GeometricCampaignConfig(n_train=60, n_verify=40)
+    camp = run_geometric_campaign(robot, cfg)
+    data = StaticArmData(np.vstack([camp.train.q, camp.verify.q]), "position",
+                         cfg.tracker_sigma_m,
+                         position=np.vstack([camp.train.position, camp.verify.position]),
+                         split=np.array(["train"] * 60 + ["verify"] * 40),
+                         tool_offset_m=cfg.tool_offset_m, robot=robot)
+    return write_recording(folder, to_recording(data, "sim"))

@@ -1,11 +1,12 @@
 """A diagnosis model as the arm's MJCF (sim/mjcf_export.py, `serpar export-mjcf`, `serpar
 diagnose --mjcf`): exact round trip, plain MuJoCo loads it anywhere, serpar run and diagnose
-take it back, and a file edited after export is refused."""
+take it back, and a file edited after export is read by its elements."""
 
 from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import mujoco
@@ -15,7 +16,13 @@ import pytest
 from serpar.cli.entry import main
 from serpar.errors import ConfigError
 from serpar.sim.arm import JOINT_NAMES
-from serpar.sim.mjcf_export import arm_spec, export_arm_mjcf, read_mjcf_model, round_trip
+from serpar.sim.mjcf_export import (
+    arm_spec,
+    export_arm_mjcf,
+    read_mjcf,
+    read_mjcf_model,
+    round_trip,
+)
 from serpar.sim.model_file import parse_model, read_model_file
 from serpar.sim.plants.arm_changes import MDH_PARAMS, PAYLOAD_BODY
 from serpar.sim.plants.from_model_file import arm_plant_changes
@@ -75,8 +82,8 @@ def test_every_effect_round_trips_exactly_and_loads_from_any_directory(tmp_path)
 
 
 def test_to_xml_alone_would_not_round_trip(tmp_path) -> None:
-    """Why the exporter writes into the source file: MjSpec.to_xml's 6 digits move the arm
-    (the nominal one's subtree masses by 1.4e-5 kg)."""
+    """Why the writer replaces to_xml's numbers: MjSpec.to_xml's 6 digits move the arm (the
+    nominal one's subtree masses by 1.4e-5 kg)."""
     spec = arm_spec(arm_plant_changes(parse_model(
         {"source": "x", "kind": "k", "effects": [], "params": {}}, "nominal")))
     path = tmp_path / "to_xml.xml"
@@ -94,14 +101,50 @@ def test_what_mujoco_cannot_express_is_listed_not_dropped(tmp_path) -> None:
     assert out.applied == ("geometric",) and out.round_trip_max == 0.0
 
 
-def test_an_edited_file_is_refused(tmp_path) -> None:
+def _edit(path: Path, tag: str, name: str, attr: str, value: str) -> None:
+    """Set one attribute of one named element in the file's text, as a user would."""
+    text = path.read_text()
+    start = text.index(f'<{tag} name="{name}"')
+    end = text.index(">", start)
+    end -= text[end - 1] == "/"  # a self-closed element keeps its "/>"
+    element = re.sub(rf'\s{attr}="[^"]*"', "", text[start:end]).rstrip()
+    path.write_text(text[:start] + element + f' {attr}="{value}"' + text[end:])
+
+
+def test_an_edited_file_is_read_by_its_elements(tmp_path) -> None:
+    """The elements win over the model text the file carries, each edit named in a note, the
+    value std 0 (set by hand); what MJCF cannot express still comes from the model text."""
+    model = parse_model(_every_effect(), "every")
+    out = export_arm_mjcf(model, tmp_path / "arm.xml")
+    _edit(out.path, "joint", "joint3", "damping", "0.75")
+    _edit(out.path, "joint", "joint5", "frictionloss", "0.0625")
+    read = read_mjcf(out.path)
+    fitted, now = model.block("joint_friction").as_dict(), read.model.block("joint_friction")
+    assert now.as_dict()["Fv3"] == 0.75 - 0.1  # the nominal 0.1 N m s/rad under it
+    assert now.as_dict()["Fc5"] == 0.0625
+    assert {n: v for n, v in now.as_dict().items() if n not in ("Fv3", "Fc5")} == {
+        n: v for n, v in fitted.items() if n not in ("Fv3", "Fc5")}
+    assert dict(zip(now.names, now.std))["Fv3"] == 0.0 and dict(zip(now.names, now.std))["Fv1"] == 1e-4
+    assert len(read.notes) == 1 and "joint_friction edited after export" in read.notes[0]
+    assert "Fv3" in read.notes[0] and "Fc5 " in read.notes[0]
+    assert read.model.effects == model.effects
+    assert read.model.block("geometric") == model.block("geometric")  # from the model text
+    changes = arm_plant_changes(read.model)
+    assert changes.damping[2] == pytest.approx(0.75, abs=1e-15) and changes.frictionloss[4] == 0.0625
+    assert "edited in" in dict(read.model.evidence)["joint_friction"]
+
+
+def test_an_edit_no_effect_is_written_into_is_named(tmp_path, capsys) -> None:
     out = export_arm_mjcf(parse_model(_every_effect(), "every"), tmp_path / "arm.xml")
-    text = out.path.read_text()
-    first = text.index('frictionloss="') + len('frictionloss="')
-    edited = text[:first] + "9" + text[first:]
-    out.path.write_text(edited)
-    with pytest.raises(ConfigError, match="dof_frictionloss.*edited after export"):
-        read_mjcf_model(out.path)
+    _edit(out.path, "geom", "link1_j2", "size", "0.07 0.065")
+    _edit(out.path, "body", PAYLOAD_BODY, "pos", "0 0 0.2")
+    model = read_mjcf_model(out.path)
+    notes = capsys.readouterr().err
+    assert "payload edited after export (com_z" in notes
+    assert "geom_size differs by 0.01" in notes and "serpar's model does not hold it" in notes
+    assert model.block("payload").as_dict()["com_z"] == pytest.approx(0.2 - 0.107 + 0.04321987654)
+    read_mjcf_model(out.path)
+    assert capsys.readouterr().err == ""  # once per version of the file
     plain = tmp_path / "plain.xml"
     plain.write_text("<mujoco><worldbody/></mujoco>")
     with pytest.raises(ConfigError, match="serpar reads back only the MJCF it exported"):

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from arm_cal_support import static_position_recording
 
 from serpar.assets import asset_path
-from serpar.calibration.arm_static_data import StaticArmData, to_recording
 from serpar.calibration.panda_data import load_panda_folder
 from serpar.calibration.robot_campaign import noise_bound_rms, robot_calibration
 from serpar.cli.entry import main
@@ -23,10 +23,8 @@ from serpar.sim.arm_measurements import PositionSet
 from serpar.sim.plants.static_arm import (
     GeometricCampaignConfig,
     build_plant,
-    run_geometric_campaign,
     tool_points,
 )
-from serpar.sim.recording import write_recording
 from serpar.sim.robot_file import load_robot
 
 PANDA_XML = str(asset_path("arm", "panda.xml"))
@@ -184,15 +182,7 @@ def test_calibrate_arm_robot_end_to_end(capsys) -> None:
 
 
 def test_diagnose_robot_end_to_end(tmp_path, capsys) -> None:
-    robot = load_robot(UR5E)
-    cfg = GeometricCampaignConfig(n_train=60, n_verify=40)
-    camp = run_geometric_campaign(robot, cfg)
-    data = StaticArmData(np.vstack([camp.train.q, camp.verify.q]), "position",
-                         cfg.tracker_sigma_m,
-                         position=np.vstack([camp.train.position, camp.verify.position]),
-                         split=np.array(["train"] * 60 + ["verify"] * 40),
-                         tool_offset_m=cfg.tool_offset_m, robot=robot)
-    rec = write_recording(tmp_path / "ur", to_recording(data, "sim"))
+    rec = static_position_recording(UR5E, tmp_path / "ur")
     assert main(["diagnose", str(rec), "--robot", UR5E, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["robot"] == {"name": "ur5e", "source": UR5E}
