@@ -27,7 +27,8 @@ import numpy as np
 from serpar.diagnosis.choose import family_from_recording
 from serpar.diagnosis.select import diagnose
 from serpar.errors import ConfigError
-from serpar.twins.registry import DOMAINS, domain_module, magnitude_range, make_twin
+from serpar.sim.robot_file import load_robot
+from serpar.twins.registry import ANY_ARM, DOMAINS, domain_module, magnitude_range, make_twin
 
 RMS_TARGET = 1.5
 WRONG_SIGMA = 2.0
@@ -125,15 +126,19 @@ def plan(trials: int, seed: int, domains: tuple[str, ...], library_only: bool = 
     return out
 
 
-def run_trial(index: int, domain: str, effect: str, magnitude: float, seed: int) -> Trial:
+def run_trial(index: int, domain: str, effect: str, magnitude: float, seed: int,
+              robot: str | None = None) -> Trial:
+    """One trial; ``robot``: the arm's URDF/MJCF file (the arm-dynamics twin on that arm,
+    diagnosed with it; None: the Panda)."""
     withheld = effect.endswith(WITHHELD)
     hidden = None if effect in ("none", WRONG) else effect.removesuffix(WITHHELD)
     sigma_error = WRONG_SIGMA if effect == WRONG else 1.0
     label = "none" if hidden is None else effect
     try:
-        rec, answer = make_twin(hidden, magnitude if hidden else None, seed, domain, sigma_error)
+        rec, answer = make_twin(hidden, magnitude if hidden else None, seed, domain, sigma_error,
+                                robot)
         t0 = time.perf_counter()
-        family = family_from_recording(rec)
+        family = family_from_recording(rec, load_robot(robot))
         if withheld:  # the library as it would be without this candidate
             family.effects = tuple(e for e in family.effects if e.name != hidden)
         diag = diagnose(family, seed)
@@ -229,13 +234,27 @@ def summarise(trials: list[Trial]) -> dict[str, object]:
     }
 
 
+def check_robot(domains: tuple[str, ...], robot: str | None) -> None:
+    """One line, before any trial, for a robot file with a domain that takes none (or a file
+    that is not an arm)."""
+    if robot is None:
+        return
+    other = [d for d in domains if d != ANY_ARM]
+    if other:
+        raise ConfigError(f"--robot is for the {ANY_ARM} domain only; drop --domain "
+                          f"{', '.join(other)} (the other domains are the Panda cell's)")
+    load_robot(robot)
+
+
 def blind_bench(trials: int, seed: int, domains: tuple[str, ...] = tuple(DOMAINS),
                 progress: Callable[[Trial], object] | None = None,
-                library_only: bool = False, kinds: tuple[str, ...] | None = None
-                ) -> list[Trial]:
+                library_only: bool = False, kinds: tuple[str, ...] | None = None,
+                robot: str | None = None) -> list[Trial]:
+    """``robot``: every trial's arm, from its URDF/MJCF file (the arm-dynamics domain only)."""
+    check_robot(domains, robot)
     out = []
     for k, (d, e, mag, s) in enumerate(plan(trials, seed, domains, library_only, kinds)):
-        out.append(run_trial(k, d, e, mag, s))
+        out.append(run_trial(k, d, e, mag, s, robot))
         if progress is not None:
             progress(out[-1])
     return out

@@ -5,10 +5,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from serpar.checks.blind_bench import KINDS, RMS_TARGET, blind_bench, summarise
+from serpar.checks.blind_bench import KINDS, RMS_TARGET, blind_bench, check_robot, summarise
 from serpar.cli import arg_types
 from serpar.cli.output import print_json, progress, table
-from serpar.twins.registry import DOMAINS
+from serpar.cli.robot_option import add_robot_option
+from serpar.twins.registry import ANY_ARM, DOMAINS
 
 
 def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -25,17 +26,21 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--library-only", action="store_true",
                    help="draw no effect outside the candidate library (the kinds effect, none "
                         "and wrong_sigma)")
+    add_robot_option(p)
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_blind_bench)
     return p
 
 
 def cmd_blind_bench(args: argparse.Namespace) -> int:
-    domains = tuple(args.domain) if args.domain else tuple(DOMAINS)
+    # another arm: its arm-dynamics twins (the other domains are the Panda cell's)
+    default = (ANY_ARM,) if args.robot else tuple(DOMAINS)
+    domains = tuple(args.domain) if args.domain else default
+    check_robot(domains, args.robot)
     bar = progress(args.trials, "blind-bench", enabled=sys.stderr.isatty())
     trials = blind_bench(args.trials, args.seed, domains, progress=lambda _t: bar.update(1),
                          library_only=args.library_only,
-                         kinds=tuple(args.kind) if args.kind else None)
+                         kinds=tuple(args.kind) if args.kind else None, robot=args.robot)
     bar.close()
     summary = summarise(trials)
     if args.json:

@@ -5,15 +5,19 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from serpar.cli import arg_types
 from serpar.cli.out_paths import RECORDING_FILES, add_force, out_folder
 from serpar.cli.output import print_json
+from serpar.cli.robot_option import add_robot_option
 from serpar.errors import ConfigError
 from serpar.sim.recording import write_recording
 from serpar.sim.strict_json import dumps
+from serpar.twins.arm_dynamics_twin import DURATION, DURATION_RANGE
 from serpar.twins.cell_twin import ANSWER_FILE, PLANT_FILE, check_effect, make_cell_twin
 from serpar.twins.cell_twin import EFFECTS as CELL_EFFECTS
-from serpar.twins.registry import effects, make_twin
+from serpar.twins.registry import ANY_ARM, domain_for, effects, make_twin
 
 
 def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -32,6 +36,11 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="size of the effect (units per domain twin module, e.g. "
                         "twins/stewart_twin.py: K, m/N, m, 1 or x Table 5; default: its default "
                         "size)")
+    add_robot_option(p)
+    p.add_argument("--duration", type=float,
+                   help=f"--domain {ANY_ARM}: seconds recorded, {DURATION_RANGE[0]:g}.."
+                        f"{DURATION_RANGE[1]:g} (default {DURATION:g}); with --robot or "
+                        f"--duration and --effect none the domain is {ANY_ARM}")
     p.add_argument("--sigma-error", type=float, default=1.0,
                    help="the recording states its noise sigma this many times too small "
                         "(default 1: stated correctly)")
@@ -55,9 +64,12 @@ def cmd_twin(args: argparse.Namespace) -> int:
                           "DIR/answer.json)")
     if args.domain == "cell" or (args.domain is None and args.effect == "mix"):
         return _cell_twin(args)
-    folder = out_folder(args.out, "--out", args.force, RECORDING_FILES + ("answer.json",))
+    _check_duration(args.duration)
     effect = None if args.effect == "none" else args.effect
-    rec, answer = make_twin(effect, args.magnitude, args.seed, args.domain, args.sigma_error)
+    domain_for(effect, args.domain, args.robot, args.duration)  # a refusal before any work
+    folder = out_folder(args.out, "--out", args.force, RECORDING_FILES + ("answer.json",))
+    rec, answer = make_twin(effect, args.magnitude, args.seed, args.domain, args.sigma_error,
+                            args.robot, args.duration)
     folder.clear()
     out = write_recording(folder.path, rec)
     (out / "answer.json").write_text(dumps(answer, indent=2))
@@ -70,6 +82,13 @@ def cmd_twin(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_duration(duration: float | None) -> None:
+    lo, hi = DURATION_RANGE
+    if duration is not None and not (np.isfinite(duration) and lo <= duration <= hi):
+        raise ConfigError(f"--duration {duration:g} s: valid {lo:g}..{hi:g} s (the {ANY_ARM} "
+                          f"twin's recording; default {DURATION:g} s)")
+
+
 def _cell_twin(args: argparse.Namespace) -> int:
     """``--domain cell``: a recorded episode of a concealed cell (twins/cell_twin.py)."""
     import sys
@@ -79,6 +98,9 @@ def _cell_twin(args: argparse.Namespace) -> int:
     if args.magnitude is not None or args.sigma_error != 1.0:
         raise ConfigError("--magnitude and --sigma-error do not apply to --domain cell (its "
                           "effects are drawn from twins/cell_twin.py's ranges)")
+    if args.robot is not None or args.duration is not None:
+        raise ConfigError(f"--robot and --duration are taken by --domain {ANY_ARM} only; "
+                          "--domain cell is the Panda cell's episode (its length: --holes)")
     check_effect(args.effect)  # a bad name fails before any work
     folder.clear()
     show = not args.json

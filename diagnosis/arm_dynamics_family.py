@@ -152,6 +152,9 @@ class ArmDynamicsFamily:
         self._regimes = self._regime_masks()
         if terms.drive_measured:
             self.max_effects = MAX_EFFECTS_DRIVE
+        # a CAD model against a real arm leaves a residual so large that a new effect started
+        # on its bound stops after one step (diagnosis/fit.py START_INSIDE)
+        self.start_inside = not dynamics.arm.is_panda
 
     # -- Family protocol -------------------------------------------------------------------
     def residual(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:

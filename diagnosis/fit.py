@@ -85,10 +85,12 @@ def unpack(blocks: tuple[Effect, ...], x: NDArray[np.float64]) -> dict[str, NDAr
 
 
 START_INSIDE = 0.01
-"""A new effect's parameter whose x0 sits on a bound (no friction, no delay) starts this share
-of its range inside: scipy's trust region starts as wide as the (scaled) start, and a start
-on zero left a fit with a large residual (a CAD model against a real arm) stopped by ``ftol``
-after one tiny step."""
+"""In a family that sets ``start_inside`` (an arm's dynamics against its own file), a new
+effect's parameter whose x0 sits on a bound (no friction, no delay) starts this share of its
+range inside: scipy's trust region starts as wide as the (scaled) start, and a start on zero
+left a fit with a large residual (a CAD model against a real arm) stopped by ``ftol`` after
+one tiny step. Other families keep their starts (a backlash fit started inside its clearance
+bound converges to another minimum)."""
 
 
 def _inside(effect: Effect) -> NDArray[np.float64]:
@@ -107,8 +109,10 @@ def fit_model(family: Family, active: tuple[str, ...], train: NDArray[np.int64],
     ``overrides``: effects with parameters fixed (:meth:`Effect.fix`), by name."""
     blocks = blocks_of(family, active, overrides)
     start = start or {}
+    inside = getattr(family, "start_inside", False)
     x0 = np.concatenate([np.clip(start[b.name], b.lower, b.upper) if b.name in start
-                         else _inside(b) for b in blocks] or [np.zeros(0)])
+                         else _inside(b) if inside else np.clip(b.x0, b.lower, b.upper)
+                         for b in blocks] or [np.zeros(0)])
     lo = np.concatenate([b.lower for b in blocks] or [np.zeros(0)])
     hi = np.concatenate([b.upper for b in blocks] or [np.zeros(0)])
     # parameters held at zero (Effect.fix) are left out of the search, not boxed in

@@ -21,9 +21,11 @@ The rules (each value at magnitude 1; the twin multiplies by its drawn magnitude
 * rotor inertia: the file's armature where it has one, else ARMATURE_SHARE of the joint's mean
   inertia (a reflected rotor is of the order of the link inertia it drives).
 * coupled pair (motor of joint n also turning joint n-1): fvm, fsm = the Panda-class friction of
-  joint n times ``factor`` of joint n-1 (the drive that carries them); Iam =
+  joint n times ``factor`` of joint n-1 (the heavier of the two drives that carry them); Iam =
   COUPLED_INERTIA_SHARE of joint n-1's rotor inertia (the TX40's Iam6 / Ia5 = 0.18), at most
-  COUPLED_LOOP_GAIN / max |M^-1[n, n-1]| (the explicit Iam ddq_n term stays stable).
+  COUPLED_LOOP_GAIN / sqrt(max M^-1_n-1,n-1 max M^-1_nn): each joint's explicit Iam ddq_other
+  term moves the other joint back by that loop gain per step, which must stay well below 1
+  (it bites on an arm file without rotor inertias: the UR5e's wrist 3 has 2.6e-4 kg m^2).
 * joint lists, as the diagnosis computes its candidates' (diagnosis/arm_dynamics_setup.py; the
   idea is copied, twins may not import the diagnosis): loaded joints (encoder offsets, ripple)
   move the gravity torque by >= LOADED_SHARE of the most sensitive joint's; scale joints
@@ -77,7 +79,8 @@ ARMATURE_SHARE = 0.5
 """Rotor inertia of a joint whose file gives none, over the joint's mean inertia (the Panda's
 0.1 kg m^2 is 0.65-0.94 of its wrist joints', 0.07-0.09 of its elbow's)."""
 COUPLED_INERTIA_SHARE = 0.2
-COUPLED_LOOP_GAIN = 0.2
+COUPLED_LOOP_GAIN = 0.15
+"""At magnitude 1; the largest drawn (1.5 x 1.3) stays under 0.3."""
 PROBE_ROWS = 200
 
 
@@ -167,6 +170,12 @@ def _grouped_rotors(arm: ArmModel) -> set[int]:
     return out
 
 
+def _coupled_inertia(plant: ArmPlant, armature: Vec) -> float:
+    a, m = plant.n - 2, plant.n - 1
+    loop = float(np.sqrt(plant.coupling_gain[a, a] * plant.coupling_gain[m, m]))
+    return float(min(COUPLED_INERTIA_SHARE * armature[a], COUPLED_LOOP_GAIN / loop))
+
+
 @lru_cache(maxsize=8)
 def arm_scale(arm: ArmModel = PANDA_ARM) -> ArmScale:
     """The twin's effect sizes on ``arm`` (cached per arm object)."""
@@ -177,8 +186,7 @@ def arm_scale(arm: ArmModel = PANDA_ARM) -> ArmScale:
     m, a = n - 1, n - 2  # the coupled motor's joint, the joint whose drive also carries it
     if arm.is_panda:
         ones = np.ones(n)
-        iam = min(COUPLED_INERTIA_SHARE * armature[a],
-                  COUPLED_LOOP_GAIN / plant.coupling_gain[m, a])
+        iam = _coupled_inertia(plant, armature)
         return ArmScale(plant, 1.0, ones, np.asarray(PANDA_COULOMB_FRICTION, float),
                         np.asarray(PANDA_VISCOUS, float), 1.0, armature, LOADED_JOINTS,
                         SCALE_JOINTS, INERTIA_LINKS, ROTOR_JOINTS,
@@ -192,7 +200,7 @@ def arm_scale(arm: ArmModel = PANDA_ARM) -> ArmScale:
     loaded = tuple(int(j) for j in np.flatnonzero(offset >= LOADED_SHARE))
     scaled = tuple(j for j in loaded if scale[j] >= SCALE_SHARE)
     grouped = _grouped_rotors(arm)
-    iam = min(COUPLED_INERTIA_SHARE * armature[a], COUPLED_LOOP_GAIN / plant.coupling_gain[m, a])
+    iam = _coupled_inertia(plant, armature)
     return ArmScale(plant, float(s), factor, coulomb * factor, viscous * factor,
                     _moving_mass(arm) / _moving_mass(PANDA_ARM), armature, loaded,
                     scaled or loaded[:1],

@@ -53,9 +53,12 @@ class SensorNoise:
 @dataclass(frozen=True)
 class Coupling:
     """A coupled drive (a coupled wrist, as the Staubli TX40's joints 5 and 6): the motor of
-    joint ``motor`` also turns joint ``joint``, so joint ``joint``'s drive carries that motor's
-    rotor inertia and friction in joint ``motor``'s motion: Iam ddq_m + fvm dq_m + fsm sign(dq_m)
-    more (0-based joints)."""
+    joint ``motor`` also turns joint ``joint``, so it spins with their sum. Beyond each joint's
+    own rotor inertia and viscous friction (its armature and damping), each joint's drive
+    carries the motor's in the *other* joint's motion: Iam ddq_other + fvm dq_other (0-based
+    joints; FIGAROH's structure, as the diagnosis' coupled_pair). The motor's dry friction,
+    fsm sign(dq_joint + dq_motor) on both, is a fixed tendon's ``frictionloss`` in the plant's
+    spec (MuJoCo's implicit friction constraint: it sticks when the motor stops)."""
 
     joint: int
     motor: int
@@ -63,20 +66,15 @@ class Coupling:
     """Iam [kg m^2]."""
     viscous: float
     """fvm [N m s/rad]."""
-    coulomb: float
-    """fsm [N m]."""
-    width: float = STRIBECK_SMOOTHING
-    """[rad/s] Width of the smoothed sign of the motor's speed in its Coulomb term."""
 
     def check(self, n: int) -> None:
         if not (0 <= self.joint < n and 0 <= self.motor < n and self.joint != self.motor):
             raise ConfigError(f"Reality.coupling joints {self.joint}, {self.motor}: two different "
                               f"joint indices in 0..{n - 1}")
-        for name, lo, hi in (("inertia", 0.0, 1.0), ("viscous", 0.0, 5.0),
-                             ("coulomb", 0.0, 5.0), ("width", 1e-6, 1.0)):
+        for name, hi in (("inertia", 1.0), ("viscous", 5.0)):
             v = getattr(self, name)
-            if not (np.isfinite(v) and lo <= v <= hi):
-                raise ConfigError(f"Reality.coupling {name}={v} outside {lo:g}..{hi:g}")
+            if not (np.isfinite(v) and 0.0 <= v <= hi):
+                raise ConfigError(f"Reality.coupling {name}={v} outside 0..{hi:g}")
 
 
 @dataclass(frozen=True)
@@ -165,7 +163,6 @@ class Reality:
         amp, period, phase = (np.array([r[i] for r in self.ripple], float) for i in (1, 2, 3))
         wavenumber = 2 * np.pi / period if len(period) else period
         n, c = self.n, self.coupling
-        c_width = 1.0 / (STRIBECK_SMOOTHING if c is None else c.width)
 
         def torque(q: Vec, dq: Vec, ddq: Vec | None = None) -> Vec:
             # called at every 0.1 ms substep: a few whole-vector ufuncs (~2.5 us), no loops.
@@ -180,14 +177,14 @@ class Reality:
             if len(joint):
                 out[joint] += amp * np.sin(wavenumber * q[joint] + phase)
             if c is not None:
-                # the coupled motor turns with joint `motor`: its rotor and friction load the
-                # drive of joint `joint` (the drive loses them; the link-side sensor sees them
-                # only through the motion). Its acceleration is the last substep's: explicit,
-                # stable while Iam |M^-1[motor, joint]| << 1 (the twin sizes Iam so)
-                v = dq[c.motor]
-                acc = 0.0 if ddq is None else ddq[c.motor]
-                out[c.joint] -= (c.inertia * acc + c.viscous * v
-                                 + c.coulomb * np.tanh(v * c_width))
+                # the coupled motor's rotor and viscous friction in the other joint's motion
+                # (the drive loses them; the link-side sensor sees them only through the
+                # motion). The acceleration is the last substep's: explicit, stable while
+                # Iam sqrt(M^-1_jj M^-1_mm) << 1 (the twin sizes Iam so)
+                a, m = c.joint, c.motor
+                acc = (0.0, 0.0) if ddq is None else (ddq[a], ddq[m])
+                out[a] -= c.inertia * acc[1] + c.viscous * dq[m]
+                out[m] -= c.inertia * acc[0] + c.viscous * dq[a]
             return out
 
         return torque

@@ -56,6 +56,13 @@ NOT_APPLICABLE: dict[str, str] = {
                          "arm does not model",
     "encoder_scale": "a transmission-ratio error between reading and link: a MuJoCo hinge has no "
                      "gear between its qpos and the link angle",
+    "armature": "a rotor-inertia change is not yet mapped onto the cell's arm (its armature "
+                "comes from assets/arm/panda.xml): serpar diagnose --mjcf writes it into the "
+                "arm's own MJCF",
+    "coupled_pair": "the cell's Panda has one motor per joint: a coupled motor belongs to "
+                    "another arm",
+    "link_inertial": "base inertial parameters do not fix the links' masses, centres of mass "
+                     "and inertias a MuJoCo body needs (several standard sets give them)",
     "contact_friction": "the journal/bore friction belongs to the cell's contacts, not the arm: "
                         "set the episode config's contact_friction to 0.2 + d_mu",
 }

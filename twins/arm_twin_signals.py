@@ -1,0 +1,162 @@
+"""The arm-dynamics twin's effects that act outside the arm's MjModel, in its sensors and
+drives (sim/plants/arm_reality.py's :class:`Reality`): torque-sensor gain and offset, actuation
+latency, torque-sensor timing, encoder offset and scale, Stribeck friction, a torque ripple, a
+coupled wrist's motor. Sizes and joints per arm: twins/arm_twin_scale.py."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from serpar.sim.physics import PhysicsConfig
+from serpar.sim.plants.arm_reality import STRIBECK_SMOOTHING, Coupling, Reality
+from serpar.sim.plants.moving_arm import TwinRun
+from serpar.sim.rigid_arm import ArmDynamics
+from serpar.twins.arm_twin_physics import friction
+from serpar.twins.arm_twin_scale import ArmScale
+
+STRIBECK_RATIO = (1.5, 2.5)
+"""Static over Coulomb friction Fs / Fc of each drive (harmonic drives: ~1.5-2.5)."""
+STRIBECK_SPEED = (0.02, 0.08)
+"""Stribeck velocity vs of each drive [rad/s]: below it the friction rises to Fs."""
+RIPPLE_PERIOD_DEG = (10.0, 45.0)
+"""Period of the torque ripple in the joint angle [deg] (8-36 per revolution)."""
+COUPLED_SPREAD = (0.7, 1.3)
+"""Per-parameter scatter of a coupled motor's Iam, fvm, fsm about the magnitude."""
+
+
+def reality(effect: str, mag: float, rng: np.random.Generator, scale: ArmScale
+            ) -> tuple[Reality, dict[str, float]]:
+    """Sensor and timing effects: torque_sensor, latency, sensor_timing, encoder_offset."""
+    n = scale.n
+    if effect == "torque_sensor":
+        gain = mag * rng.uniform(0.5, 1.0, n) * rng.choice([-1.0, 1.0])
+        bias = rng.uniform(0.1, 0.5, n) * rng.choice([-1.0, 1.0], n) * scale.factor
+        return (Reality(torque_gain=gain, torque_bias=bias, n=n),
+                {f"gain{j + 1}": float(g) for j, g in enumerate(gain)})
+    if effect == "latency":
+        delay = round(mag, 4)
+        return Reality(delay=delay, n=n), {"delay": delay}
+    if effect == "sensor_timing":
+        lag = round(mag, 4)  # whole 0.1 ms substeps
+        return Reality(sensor_lag=lag, n=n), {"lag": lag}
+    if effect == "encoder_offset":
+        # the loaded joints only: the first joint's (about gravity) is invisible to dynamics
+        joints = list(scale.loaded_joints)
+        off = np.zeros(n)
+        off[joints] = rng.uniform(-1.0, 1.0, len(joints))
+        off[joints] *= mag / np.max(np.abs(off[joints]))
+        return (Reality(encoder_offset=off, n=n),
+                {f"offset{j + 1}": float(off[j]) for j in joints})
+    return Reality(n=n), {}
+
+
+def stribeck(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator, scale: ArmScale
+             ) -> tuple[Reality, dict[str, object], dict[str, object]]:
+    # Coulomb + viscous as joint_friction (MuJoCo's); the Stribeck excess acts in the drive
+    n = scale.n
+    params: dict[str, object] = dict(friction(spec, mag, rng, scale))
+    fc = np.array([params[f"Fc{j + 1}"] for j in range(n)], float)
+    ratio = rng.uniform(*STRIBECK_RATIO, n)
+    vs = rng.uniform(*STRIBECK_SPEED, n)
+    excess = (ratio - 1.0) * fc
+    params.update({f"Fs{j + 1}": float(ratio[j] * fc[j]) for j in range(n)})
+    params.update({f"vs{j + 1}": float(vs[j]) for j in range(n)})
+    order = np.argsort(-excess)
+    j = int(order[0]) + 1
+    words = (f"every drive loses extra torque at low speed (|dq| below its vs, 0.02-0.08 rad/s), "
+             f"joint {j} most ({excess[j - 1]:.2f} N m more below {vs[j - 1]:.3f} rad/s): "
+             "friction falling from Fs to Fc with speed, beyond Coulomb + viscous; in the "
+             "command (tau_J_d - tau_J), not in the link-side sensor")
+    signature: dict[str, object] = {"channels": [f"tau_J_d{i + 1}" for i in order],
+                                    "variables": [f"dq{j}"], "words": words}
+    width = None
+    if not scale.arm.is_panda:
+        # the explicit smoothed sign's slope excess / width, over one 0.1 ms step, must move a
+        # light joint (an arm file without rotor inertia) by well under its own speed
+        h = PhysicsConfig().timestep
+        width = np.maximum(STRIBECK_SMOOTHING, 2.0 * h * excess / scale.plant.inertia_min)
+    return (Reality(stribeck_excess=excess, stribeck_speed=vs, stribeck_width=width, n=n),
+            params, signature)
+
+
+def ripple(mag: float, rng: np.random.Generator, scale: ArmScale
+           ) -> tuple[Reality, dict[str, object], dict[str, object]]:
+    joint = int(rng.choice(scale.loaded_joints))
+    period_deg = float(rng.uniform(*RIPPLE_PERIOD_DEG))
+    phase = float(rng.uniform(0.0, 2 * np.pi))
+    amp = float(mag * scale.factor[joint])
+    j = joint + 1
+    params: dict[str, object] = {"joint": j, "amplitude": amp, "period_deg": period_deg,
+                                 "period_rad": float(np.radians(period_deg)), "phase": phase}
+    words = (f"joint {j}'s drive adds {amp:.2f} N m sin(2 pi q{j} / {period_deg:.1f} deg + "
+             f"phase): the command tau_J_d{j} is off by a ripple periodic in q{j}; the "
+             "link-side sensor and the other joints are not")
+    signature: dict[str, object] = {"channels": [f"tau_J_d{j}"], "variables": [f"q{j}"],
+                                    "period_deg": period_deg, "words": words}
+    return (Reality(ripple=((joint, amp, np.radians(period_deg), phase),), n=scale.n),
+            params, signature)
+
+
+def encoder_scale(mag: float, rng: np.random.Generator, scale: ArmScale
+                  ) -> tuple[Reality, dict[str, object]]:
+    first = int(rng.choice(scale.scale_joints))
+    s = np.zeros(scale.n)
+    s[first] = mag * rng.choice([-1.0, 1.0])
+    others = [j for j in scale.loaded_joints if j != first]
+    if rng.random() < 0.5 and others:  # a second, smaller one on another loaded joint
+        second = int(rng.choice(others))
+        s[second] = mag * rng.uniform(-1.0, 1.0)
+    return (Reality(encoder_scale=s, n=scale.n),
+            {f"scale{j + 1}": float(s[j]) for j in scale.loaded_joints})
+
+
+def scale_signature(reality: Reality, run: TwinRun, rate: float,
+                    scale: ArmScale) -> dict[str, object]:
+    """Where the scale error shows: the channel whose link torque it moves most, the nominal
+    model at the true motion against the model at the read one (std about the mean: the
+    diagnosis tares each sensor's constant). Gravity carries most of it, inertia the rest."""
+    dyn = ArmDynamics(arm=scale.arm)
+    q = run.q_true
+    dq = np.gradient(q, axis=0) * rate  # the true motion is noise-free: plain differences
+    ddq = np.gradient(dq, axis=0) * rate
+    rows = slice(2, -2, 20)  # 50 Hz rows are plenty for the slow excitation
+    gain = 1.0 + reality.encoder_scale
+    true = dyn.link_torque(q[rows], dq[rows], ddq[rows])
+    read = dyn.link_torque(reality.encoder_reading(q[rows]), gain * dq[rows], gain * ddq[rows])
+    shift = np.std(true - read, axis=0)
+    c = int(np.argmax(shift)) + 1
+    # every joint within half of the largest: an angle's error moves several joints' gravity
+    seen = [int(i) + 1 for i in np.argsort(-shift) if shift[i] >= 0.5 * shift[c - 1]]
+    scaled = [int(i) for i in np.argsort(-np.abs(reality.encoder_scale))
+              if reality.encoder_scale[i]]
+    j = scaled[0] + 1
+    return {"channels": [name for i in seen for name in (f"tau_J{i}", f"tau_J_d{i}")],
+            "variables": [f"q{i + 1}" for i in scaled],
+            "torque_shift_std": [float(v) for v in shift],
+            "words": f"encoder {j} reads q{j} (1 {reality.encoder_scale[j - 1]:+.4f}) about its "
+                     f"zero: the model's torque (gravity mostly) is off by an amount growing with "
+                     f"q{j}, most on joint {c} ({shift[c - 1]:.2f} N m std), in both tau_J{c} "
+                     f"and tau_J_d{c}"}
+
+
+def coupled_pair(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator, scale: ArmScale
+                 ) -> tuple[Reality, dict[str, float], list[list[int]]]:
+    """The last two joints on a coupled wrist: the motor of joint n also turns joint n-1 (the
+    TX40's joints 5 and 6), so it spins with q_n-1 + q_n: each of the two drives carries its
+    rotor inertia and viscous friction in the other joint's motion (Reality.coupling) and its
+    dry friction with the sign of their sum (a fixed tendon q_n-1 + q_n with that
+    ``frictionloss``: MuJoCo's friction constraint, so the motor sticks as a joint does). The
+    reality, the answer's Iam<n>, fvm<n>, fsm<n>, and the recording's ``couplings``
+    ([[n-1, n]], 1-based)."""
+    n = scale.n
+    a, m = n - 2, n - 1
+    iam, fvm, fsm = (float(mag * ref * rng.uniform(*COUPLED_SPREAD)) for ref in scale.coupled)
+    tendon = spec.add_tendon(name="twin_coupled_motor", frictionloss=fsm)
+    for name in (scale.arm.joint_names[a], scale.arm.joint_names[m]):
+        tendon.wrap_joint(name, 1.0)
+    # Coulomb's law as the joints' own dry friction has it (arm_twin_physics.friction)
+    tendon.solref_friction = [2.0 * PhysicsConfig().timestep, 1.0]
+    tendon.solimp_friction = [0.99, 0.999, 0.001, 0.5, 2.0]
+    params = {f"Iam{n}": iam, f"fvm{n}": fvm, f"fsm{n}": fsm}
+    return Reality(coupling=Coupling(a, m, iam, fvm), n=n), params, [[a + 1, m + 1]]
