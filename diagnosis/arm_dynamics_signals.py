@@ -12,7 +12,7 @@ window (Hann, not Savitzky-Golay, whose sharp ends pass the differentiated quant
 noise) keeps q̈'s noise ~40x lower (2.4e-3 rad/s² for a 51-sample window); rows a window apart have independent noise, which the
 chi-square tests downstream assume.
 
-Sampling model (what a row k's samples mean, see docs of sim/plants/moving_panda.py):
+Sampling model (what a row k's samples mean, see docs of sim/plants/moving_arm.py):
 ``q`` at t_k; ``tau_J`` the mean over the period ending at t_k (centred half a period
 earlier); ``tau_J_d`` held over [t_k, t_k+1), so its continuous mean around t_k is the mean
 of the commands k-1 and k.
