@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from itertools import pairwise
 
 import numpy as np
 import scipy.sparse as sp
@@ -35,6 +34,7 @@ from serpar.diagnosis.arm_dynamics_setup import (
     declared_couplings,
     drifting_tare,
     encoder_visibility,
+    regime_masks,
     stated_tare_walk,
 )
 from serpar.diagnosis.arm_dynamics_signals import (
@@ -62,10 +62,6 @@ BLOCK_S = 2.0
 """Length of the alternating training / held-out time blocks [s]."""
 CHANNELS: tuple[str, ...] = ch.TAU_J + ch.TAU_J_D
 """The Panda's residual columns of one row with sensors and command, in order."""
-TOP_SHARE = 0.25
-"""A row is in a joint's "high gravity load" / "high acceleration" regime when it is in the
-top quarter of that joint's |g| / |q̈| over the recording."""
-TIME_BINS = 3
 MAX_EFFECTS_DRIVE = 6
 """Effects a measured drive torque may need at once: friction, its Stribeck fall, rotor
 inertia, a coupled motor, link inertia, a gain (a real drive has them all; each must still
@@ -149,7 +145,7 @@ class ArmDynamicsFamily:
                             "no link-side torque sensors (tau_J): the command alone is compared"),)
         self.n_samples = len(terms.time)
         self._phases = phases
-        self._regimes = self._regime_masks()
+        self._regimes = regime_masks(terms, phases)
         if terms.drive_measured:
             self.max_effects = MAX_EFFECTS_DRIVE
         # a CAD model against a real arm leaves a residual so large that a new effect started
@@ -282,34 +278,6 @@ class ArmDynamicsFamily:
         table = values.reshape(len(self._knots), self.n)
         t = self.terms.time[rows]
         return np.stack([np.interp(t, self._knots, table[:, j]) for j in range(self.n)], axis=1)
-
-    # -- where -----------------------------------------------------------------------------
-    def _regime_masks(self) -> dict[tuple[str, str], NDArray[np.bool_]]:
-        """Boolean masks over rows (rows, or rows x joints for per-joint regimes)."""
-        t = self.terms
-        v = t.dq_full
-        idx = t.rows.centre[:, None] + np.arange(-t.rows.half, t.rows.half + 1)[None, :]
-        window = v[idx]  # rows x window x joints
-        reversal = np.any(window > 0, axis=1) & np.any(window < 0, axis=1)
-
-        def top(x: Vec) -> NDArray[np.bool_]:
-            mag = np.abs(x)
-            # a joint whose |x| never rises above round-off (gravity on joint 1) has no regime
-            return (mag >= np.quantile(mag, 1.0 - TOP_SHARE, axis=0)) & (mag > 1e-6)
-
-        masks = {("regime", "velocity reversal"): reversal,
-                 ("regime", "high gravity load"): top(t.gravity),
-                 ("regime", "high acceleration"): top(t.ddq)}
-        span = t.time[-1] - t.time[0]
-        edges = t.time[0] + span * np.arange(TIME_BINS + 1) / TIME_BINS
-        for a, b in pairwise(edges):
-            masks[("elapsed time", f"{a:.0f}-{b:.0f} s")] = (t.time >= a) & (t.time <= b)
-        if len({p[0] for p in self._phases}) > 1:
-            for name, a, b in self._phases:
-                key = ("phase", name)
-                inside = (t.time >= a) & (t.time <= b)
-                masks[key] = masks.get(key, np.zeros_like(inside)) | inside
-        return masks
 
 
 def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None,

@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from serpar.diagnosis.arm_dynamics_effects import LINEAR, EffectModels, linear_columns
+from serpar.diagnosis.arm_dynamics_effects import INERTIAL, EffectModels
 from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.family import Effect
 
@@ -83,6 +83,56 @@ def tare_columns(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np
         vals.append(v[keep])
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(r_idx), np.concatenate(c_idx))),
                          shape=(len(rows) * n_ch, weights.shape[0] * n))
+
+
+LINEAR = ("joint_friction", "link_friction", "armature", "torque_sensor", INERTIAL)
+"""Effects linear in their parameters that leave the rows' sigma alone (a coupled motor's
+block too): their residual columns are exact (:func:`linear_columns`), not differences."""
+
+
+def linear_columns(models: EffectModels, name: str, params: Mapping[str, Vec],
+                   rows: NDArray[np.int64]) -> tuple[Vec, Vec, Vec, Vec] | None:
+    """d(link model), d(drive model), d(link band), d(drive band) per parameter of ``name``
+    (each params x rows x n), or None where the effect is not linear (differences then)."""
+    t, n, k = models.terms, models.n, len(rows)
+    p = params[name]
+    size = p.size
+    link, drive = np.zeros((size, k, n)), np.zeros((size, k, n))
+    link_band, band = np.zeros((size, k, n)), np.zeros((size, k, n))
+    j = np.arange(n)
+    if name in ("joint_friction", "link_friction"):
+        sign = np.sign(p[:n])
+        drive[j, :, j] = models.coulomb[rows].T
+        drive[n + j, :, j] = models.viscous[rows].T
+        band[j, :, j] = (models.stuck[rows] * sign).T
+        if name == "link_friction":
+            link[j, :, j] = models.coulomb_link[rows].T
+            link[n + j, :, j] = models.viscous_link[rows].T
+            link_band[j, :, j] = (models.stuck_link[rows] * sign).T
+    elif name == "armature":
+        drive[j, :, j] = models.acceleration[rows].T
+    elif name == INERTIAL:
+        if models.inertial is None:
+            return None
+        link, drive = models.inertial.columns_at(rows)
+        if not t.has_link:
+            link = np.zeros_like(drive)
+    elif name == "torque_sensor":
+        if t.has_link:
+            link[j, :, j] = t.tau_link_model[rows].T
+        else:
+            drive[j, :, j] = t.tau_full_model[rows].T
+    else:
+        coupling = dict(models._coupled(params)).get(name)
+        if coupling is None:
+            return None
+        a, m = coupling.joint - 1, coupling.motor - 1
+        for here, other in ((a, m), (m, a)):
+            drive[0, :, here] = models.acceleration[rows, other]
+            drive[1, :, here] = models.viscous[rows, other]
+            drive[2, :, here] = models.motor_sign[coupling][rows]
+            band[2, :, here] = models.motor_stuck[coupling][rows] * np.sign(p[2])
+    return link, drive, link_band, band
 
 
 def _exact(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64], name: str,

@@ -4,6 +4,8 @@ can see, and the coupled drives the recording declares."""
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -26,6 +28,10 @@ SCALE_MIN_RMS = 1.0
 """[N m] Joints whose nominal torque varies less than this are not tested for scale."""
 PROBE_ROWS = 200
 """Rows at which the encoder errors' visibility is probed (evenly spread)."""
+TOP_SHARE = 0.25
+"""A row is in a joint's "high gravity load" / "high acceleration" regime when it is in the
+top quarter of that joint's |g| / |q̈| over the recording."""
+TIME_BINS = 3
 
 
 def stated_tare_walk(rec: Recording) -> float:
@@ -131,3 +137,33 @@ def declared_couplings(rec: Recording, n: int) -> tuple[Coupling, ...]:
     if bad:
         raise IdentificationError(f"coupled drives {bad} name joints outside 1..{n}")
     return tuple(Coupling(a, m) for a, m in dict.fromkeys(pairs))
+
+
+def regime_masks(terms: Terms, phases: tuple[tuple[str, float, float], ...]
+                 ) -> dict[tuple[str, str], NDArray[np.bool_]]:
+    """The "where" table's regimes: boolean masks over rows (rows, or rows x joints for
+    per-joint regimes)."""
+    t = terms
+    v = t.dq_full
+    idx = t.rows.centre[:, None] + np.arange(-t.rows.half, t.rows.half + 1)[None, :]
+    window = v[idx]  # rows x window x joints
+    reversal = np.any(window > 0, axis=1) & np.any(window < 0, axis=1)
+
+    def top(x: Vec) -> NDArray[np.bool_]:
+        mag = np.abs(x)
+        # a joint whose |x| never rises above round-off (gravity on joint 1) has no regime
+        return (mag >= np.quantile(mag, 1.0 - TOP_SHARE, axis=0)) & (mag > 1e-6)
+
+    masks = {("regime", "velocity reversal"): reversal,
+             ("regime", "high gravity load"): top(t.gravity),
+             ("regime", "high acceleration"): top(t.ddq)}
+    span = t.time[-1] - t.time[0]
+    edges = t.time[0] + span * np.arange(TIME_BINS + 1) / TIME_BINS
+    for a, b in pairwise(edges):
+        masks[("elapsed time", f"{a:.0f}-{b:.0f} s")] = (t.time >= a) & (t.time <= b)
+    if len({p[0] for p in phases}) > 1:
+        for name, a, b in phases:
+            key = ("phase", name)
+            inside = (t.time >= a) & (t.time <= b)
+            masks[key] = masks.get(key, np.zeros_like(inside)) | inside
+    return masks

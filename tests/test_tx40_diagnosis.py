@@ -9,15 +9,11 @@ published model 2.05 / 1.64 / 1.76 / 0.79 / 0.96 / 0.74 on the same windows."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
+from tx40_support import TX40, import_tx40
 
 from serpar.checks.tx40_table import tx40_table
-from serpar.cli.entry import main
 
-TX40 = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "staubli_tx40"
-DOCS = Path(__file__).resolve().parents[1] / "docs" / "examples"
 pytestmark = [pytest.mark.skipif(not TX40.is_dir(), reason="../shared/realdata/staubli_tx40 "
                                  "not present"), pytest.mark.slow]
 
@@ -25,9 +21,7 @@ pytestmark = [pytest.mark.skipif(not TX40.is_dir(), reason="../shared/realdata/s
 @pytest.fixture(scope="module")
 def table(tmp_path_factory: pytest.TempPathFactory) -> dict:
     out = tmp_path_factory.mktemp("tx40") / "rec"
-    assert main(["import", str(TX40 / "pos_read_data.csv"), str(TX40 / "curr_data.csv"),
-                 "--spec", str(DOCS / "tx40_import.yaml"), "--sigma", "q2=9e-6,q3=6.4e-6",
-                 "--out", str(out)]) == 0
+    import_tx40(out)
     return tx40_table(out, TX40)
 
 

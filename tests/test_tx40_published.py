@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tx40_support import TX40, import_tx40
 
 from serpar.checks.tx40_published import (
     DATA,
@@ -21,11 +22,8 @@ from serpar.checks.tx40_published import (
     read_published,
     sane,
 )
-from serpar.cli.entry import main
 from serpar.errors import ConfigError
 
-TX40 = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "staubli_tx40"
-DOCS = Path(__file__).resolve().parents[1] / "docs" / "examples"
 pytestmark = pytest.mark.skipif(not TX40.is_dir(), reason="../shared/realdata/staubli_tx40 not present")
 
 HELD_OUT_BOUND = (3.0, 3.1, 2.0, 1.0, 1.5, 1.0)
@@ -36,9 +34,7 @@ published 2.36, 2.40, 1.50, 0.76, 1.16, 0.75 against CAD 25.8, 19.0, 9.7, 5.9, 3
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("tx40") / "rec"
-    assert main(["import", str(TX40 / "pos_read_data.csv"), str(TX40 / "curr_data.csv"),
-                 "--spec", str(DOCS / "tx40_import.yaml"), "--sigma", "q2=9e-6,q3=6.4e-6",
-                 "--out", str(out)]) == 0
+    import_tx40(out)
     return out
 
 
