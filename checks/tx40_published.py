@@ -42,7 +42,17 @@ from serpar.sim.rigid_arm import ArmDynamics
 
 Vec = NDArray[np.float64]
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "staubli_tx40"
+_TX40 = Path("shared") / "realdata" / "staubli_tx40"
+
+
+def _default_data() -> Path:
+    """The staubli_tx40 folder beside a source checkout, else beside the working directory
+    (an installed package lives in site-packages, away from ../shared)."""
+    places = (Path(__file__).resolve().parents[2], Path.cwd().parent, Path.cwd())
+    return next((p / _TX40 for p in places if (p / _TX40).is_dir()), places[-1].parent / _TX40)
+
+
+DATA = _default_data()
 URDF = Path("urdf") / "tx40_mdh_modified.urdf"
 PUBLISHED = Path("published") / "TX40_bp_5.csv"
 N_JOINTS = 6

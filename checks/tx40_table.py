@@ -110,9 +110,13 @@ def markdown(t: dict[str, object]) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("recording")
+    ap.add_argument("--data", type=Path, default=DATA,
+                    help=f"the staubli_tx40 folder (default {DATA})")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
-    t = tx40_table(args.recording)
+    if not (args.data / URDF).is_file():
+        ap.error(f"{args.data / URDF} not found (--data names the staubli_tx40 folder)")
+    t = tx40_table(args.recording, args.data)
     print(json.dumps(t, indent=1) if args.json else markdown(t))
     return 0
 
