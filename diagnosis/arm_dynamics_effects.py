@@ -10,10 +10,13 @@ evaluated with ``mj_rne`` and no hand-written dynamics:
   arm with all but one link massless, and from 10 reference payload bodies); the payload's
   inertia is fitted through its extent (sim/plants/arm_changes.py), so every fitted tensor
   is a rigid body's;
+* the published sigmoid friction is evaluated from each window's full-rate velocity
+  (arm_dynamics_sigmoid.py);
 * friction, rotor inertia, a coupled motor's terms and sensor gain are linear regressors on
   the data and the nominal torque; the
   Stribeck fall's regressor is tabulated on a grid of Stribeck speeds and interpolated in
-  log speed, so its one non-linear parameter is fitted too;
+  log speed, so each joint's transition speed is fitted too;
+* a tilted base turns gravity (arm_dynamics_tilt.py: exact, MuJoCo's gravity torque per axis);
 * latency shifts the windowed command (a cubic spline) by the delay;
 * sensor timing shifts the link channel's model by the torque sensors' lag behind the
   encoders, to first order (minus lag x the windowed rate of the nominal link torque);
@@ -51,7 +54,11 @@ from serpar.diagnosis.arm_dynamics_payload import (
     payload_inertial,
     standard_parameters,
 )
+from serpar.diagnosis.arm_dynamics_sigmoid import NAME as SIGMOID
+from serpar.diagnosis.arm_dynamics_sigmoid import SigmoidFriction
 from serpar.diagnosis.arm_dynamics_terms import Terms
+from serpar.diagnosis.arm_dynamics_tilt import NAME as TILT
+from serpar.diagnosis.arm_dynamics_tilt import BaseTilt
 from serpar.diagnosis.family import Effect
 from serpar.sim.rigid_arm import PANDA_ARM, ArmDynamics
 
@@ -101,6 +108,8 @@ class EffectModels:
         signed = np.sign(v) * moving
         self.stribeck = np.stack([rows.at(signed * np.exp(-(v / vs) ** 2))
                                   for vs in STRIBECK_SPEEDS])  # speeds x rows x n
+        self.sigmoid = SigmoidFriction(terms)
+        self.tilt = BaseTilt(terms, dynamics)
         # rotor inertia: the windowed acceleration, as the nominal armature term enters
         self.acceleration = rows.at(terms.a_full)
         self.couplings = couplings
@@ -174,9 +183,11 @@ class EffectModels:
             drive += self.coulomb[rows] * p[:n] + self.viscous[rows] * p[n:]
             link_band += self.stuck_link[rows] * np.abs(p[:n])
             band += self.stuck[rows] * np.abs(p[:n])
+        if SIGMOID in params:  # smooth through zero speed: no stiction band
+            drive += self.sigmoid.torque(params[SIGMOID], rows)
         if "stribeck_friction" in params:
             p = params["stribeck_friction"]
-            drive += self._stribeck(float(p[n]), rows) * p[:n]
+            drive += self._stribeck(p[n:], rows) * p[:n]
             band += self.stuck[rows] * np.abs(p[:n])
         if "armature" in params:
             drive += self.acceleration[rows] * params["armature"]
@@ -194,6 +205,10 @@ class EffectModels:
             drive += self.inertia_drive[rows] @ params["link_inertia"]
         if INERTIAL in params and self.inertial is not None:
             d_link, d_drive = self.inertial.contribution(params[INERTIAL], rows)
+            link += d_link
+            drive += d_drive
+        if TILT in params:
+            d_link, d_drive = self.tilt.torque(params[TILT], rows)
             link += d_link
             drive += d_drive
         if "payload" in params:
@@ -282,11 +297,13 @@ class EffectModels:
         base = self.base_link if sensor else self.base_drive
         return self.dyn.link_torque(q, dq, ddq) - base[rows]
 
-    def _stribeck(self, speed: float, rows: NDArray[np.int64]) -> Vec:
-        """The Stribeck regressor at ``speed``, interpolated in log speed on the grid."""
-        x = np.log(np.clip(speed, STRIBECK_SPEEDS[0], STRIBECK_SPEEDS[-1]))
+    def _stribeck(self, speeds: Vec, rows: NDArray[np.int64]) -> Vec:
+        """The Stribeck regressor at each joint's ``speeds``, interpolated in log speed on the
+        grid (rows x n)."""
+        x = np.log(np.clip(speeds, STRIBECK_SPEEDS[0], STRIBECK_SPEEDS[-1]))
         grid = LOG_STRIBECK_SPEEDS
-        k = int(np.clip(np.searchsorted(grid, x) - 1, 0, len(grid) - 2))
+        k = np.clip(np.searchsorted(grid, x) - 1, 0, len(grid) - 2)
         w = (x - grid[k]) / (grid[k + 1] - grid[k])
-        return (1.0 - w) * self.stribeck[k][rows] + w * self.stribeck[k + 1][rows]
-
+        j = np.arange(self.n)
+        r = rows[:, None]
+        return (1.0 - w) * self.stribeck[k, r, j] + w * self.stribeck[k + 1, r, j]

@@ -1,7 +1,7 @@
 """The arm-dynamics residual's Jacobian for the fit (diagnosis/fit.py takes a family's own).
 
 Exact columns for the effects linear in their parameters (friction, rotor inertia, a coupled
-motor, a torque gain: arm_dynamics_effects.linear_columns), forward differences as scipy's
+motor, a torque gain: :func:`linear_columns`) and for the sigmoid friction's, forward differences as scipy's
 ``"2-point"`` takes them (step sqrt(eps) max(1, |x|), signed like x) for every other effect's,
 and exact columns for the torque tares: a tare enters
 the link channel linearly, so its column is minus its interpolation weight at the row, through
@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from serpar.diagnosis.arm_dynamics_effects import INERTIAL, EffectModels
+from serpar.diagnosis.arm_dynamics_effects import INERTIAL, SIGMOID, TILT, EffectModels
 from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.family import Effect
 
@@ -88,6 +88,9 @@ def tare_columns(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np
 LINEAR = ("joint_friction", "link_friction", "armature", "torque_sensor", INERTIAL)
 """Effects linear in their parameters that leave the rows' sigma alone (a coupled motor's
 block too): their residual columns are exact (:func:`linear_columns`), not differences."""
+EXACT = (*LINEAR, SIGMOID, TILT)
+"""Effects whose columns are exact: the linear ones, the sigmoid friction's and the base
+tilt's (analytic)."""
 
 
 def linear_columns(models: EffectModels, name: str, params: Mapping[str, Vec],
@@ -111,6 +114,12 @@ def linear_columns(models: EffectModels, name: str, params: Mapping[str, Vec],
             link_band[j, :, j] = (models.stuck_link[rows] * sign).T
     elif name == "armature":
         drive[j, :, j] = models.acceleration[rows].T
+    elif name == SIGMOID:
+        drive = models.sigmoid.columns(p, rows)
+    elif name == TILT:
+        link, drive = models.tilt.columns(p, rows)
+        if not t.has_link:
+            link = np.zeros_like(drive)
     elif name == INERTIAL:
         if models.inertial is None:
             return None
@@ -166,7 +175,7 @@ def residual_jacobian(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArr
             cols.append(tare_columns(family, params, rows).toarray())
             continue
         exact = (_exact(family, params, rows, name, misfit)
-                 if name in LINEAR or name.startswith("coupled_pair") else None)
+                 if name in EXACT or name.startswith("coupled_pair") else None)
         if exact is not None:
             cols.append(exact)
             continue

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from serpar.diagnosis.arm_dynamics_sigmoid import sigmoid_effect
+from serpar.diagnosis.arm_dynamics_tilt import tilt_effect
 from serpar.diagnosis.family import Effect
 from serpar.sim.plants.arm_changes import EXTENT
 
@@ -50,8 +52,8 @@ velocity (central difference, noise ~1e-3 rad/s) has a certain sign. The default
 ``ArmDynamicsConfig.stick_velocity``; a recording whose joints creep under force control sets
 its own (diagnosis/episode_family.py)."""
 STRIBECK_SPEEDS = np.geomspace(STICK_VELOCITY, 0.4, 20)
-"""[rad/s] Grid of the Stribeck regressor; the search range of the Stribeck speed (a fall
-below the speed at which a joint may be stuck could not be seen)."""
+"""[rad/s] Grid of the Stribeck regressor; the search range of each joint's Stribeck speed (a
+fall below the speed at which a joint may be stuck could not be seen)."""
 PAYLOAD_PARAMS = ("mass", "com_x", "com_y", "com_z") + EXTENT
 EXTENT_DIAGONAL = np.array([n[1] == n[2] for n in EXTENT])
 EXTENT_START = np.where(EXTENT_DIAGONAL, 0.03, 0.0)
@@ -61,7 +63,8 @@ zero: at zero mass the CoM has no gradient to start from."""
 
 COMMAND_ONLY = ("latency",)
 """Effects only a commanded torque shows (a command delivered late)."""
-DRIVE_ONLY = ("joint_friction", "stribeck_friction", "armature", "coupled_pair")
+DRIVE_ONLY = ("joint_friction", "sigmoid_friction", "stribeck_friction", "armature",
+              "coupled_pair")
 """Effects only a drive channel shows (inside the drive, before any link-side sensor)."""
 LINK_ONLY = ("link_friction", "sensor_timing")
 """Effects that need the link-side sensors: friction after the gearbox is told from the
@@ -120,6 +123,8 @@ def arm_effects(n: int, channels: Channels, offset_joints: tuple[int, ...],
     if drive:
         out.append(_friction("joint_friction", "joint friction (Coulomb + viscous, inside the "
                              "drive)", n, friction_bounds))
+    if drive:
+        out.append(sigmoid_effect(n, fc_max))
     if channels.link:
         out.append(_friction("link_friction", "joint friction on the link side of the torque "
                              "sensors (Coulomb + viscous; bearings, seals: in the measured "
@@ -127,11 +132,14 @@ def arm_effects(n: int, channels: Channels, offset_joints: tuple[int, ...],
     if drive:
         out.append(Effect(
             "stribeck_friction", "Stribeck friction (static friction above the Coulomb level, "
-            "falling off with speed: dFs exp(-(v/vs)^2), dFs = Fs - Fc)",
-            tuple(f"dFs{j}" for j in J) + ("vs",), ("N m",) * n + ("rad/s",),
-            np.r_[np.zeros(n), 0.05], np.r_[np.zeros(n), STRIBECK_SPEEDS[0]],
-            np.r_[np.full(n, fc_max), STRIBECK_SPEEDS[-1]],
-            physical_lower=(True,) * n + (False,)))
+            "falling off with speed: dFs exp(-(v/vs)^2) per joint, dFs = Fs - Fc, vs its own "
+            "transition speed)",
+            tuple(f"dFs{j}" for j in J) + tuple(f"vs{j}" for j in J),
+            ("N m",) * n + ("rad/s",) * n,
+            np.r_[np.zeros(n), np.full(n, 0.05)], np.r_[np.zeros(n), np.full(n, STRIBECK_SPEEDS[0])],
+            np.r_[np.full(n, fc_max), np.full(n, STRIBECK_SPEEDS[-1])],
+            physical_lower=(True,) * n + (False,) * n,
+            amplitude_of=(-1,) * n + tuple(range(n))))
         out.append(Effect(
             "armature", "rotor inertia (armature) per joint, inside the drive",
             tuple(f"Ia{j}" for j in J), ("kg m^2",) * n, np.zeros(n), -np.asarray(armature, float),
@@ -157,6 +165,7 @@ def arm_effects(n: int, channels: Channels, offset_joints: tuple[int, ...],
         np.r_[5.0, 0.3, 0.3, 0.5, np.full(6, 0.3)],
         physical_lower=(False,) * 4 + tuple(bool(d) for d in EXTENT_DIAGONAL),
         excess_words="the nominal model carries {value} at the flange that the arm does not have"))
+    out.append(tilt_effect())
     out.append(Effect("link_inertia", "link mass/inertia error (relative, per link)",
                       tuple(f"link{j}" for j in J), ("1",) * n, np.zeros(n), np.full(n, -0.9),
                       np.full(n, 2.0)))

@@ -52,6 +52,11 @@ class Effect:
     lacks (``"{value}"`` is replaced by its magnitude with unit), e.g. a payload of -0.7 kg."""
     fixed: tuple[int, ...] = ()
     """Parameters held at zero because the data do not identify them (:meth:`fix`)."""
+    amplitude_of: tuple[int, ...] = ()
+    """Per parameter, the index of the amplitude whose shape it sets (-1: none; empty: no
+    parameter is a shape), e.g. a joint's Stribeck speed is the shape of its Stribeck excess:
+    with no amplitude on that joint the shape is not identified, and both are held
+    (diagnosis/stability.py's ``fit_identified``)."""
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -74,6 +79,10 @@ class Effect:
             raise IdentificationError(f"Effect {self.name!r}: lower bound above upper bound")
         if np.any(self.x0 < self.lower) or np.any(self.x0 > self.upper):
             raise IdentificationError(f"Effect {self.name!r}: x0 lies outside [lower, upper]")
+        if self.amplitude_of and (len(self.amplitude_of) != n
+                                  or any(not -1 <= a < n for a in self.amplitude_of)):
+            raise IdentificationError(f"Effect {self.name!r}: amplitude_of needs {n} indices "
+                                      "in -1..n-1")
         if not isinstance(self.physical_lower, bool) and len(self.physical_lower) != n:
             raise IdentificationError(f"Effect {self.name!r}: physical_lower has "
                                       f"{len(self.physical_lower)} flags, param_names has {n}")
@@ -91,7 +100,11 @@ class Effect:
 
     def restricted(self, keep: NDArray[np.int64]) -> Effect:
         """The same effect with only the parameters ``keep`` (indices into param_names)."""
+        where = {int(i): k for k, i in enumerate(keep)}
+        amplitude_of = (tuple(where.get(self.amplitude_of[i], -1) for i in keep)
+                        if self.amplitude_of else ())
         return replace(self, param_names=tuple(self.param_names[i] for i in keep),
+                       amplitude_of=amplitude_of,
                        units=tuple(self.units[i] for i in keep), x0=self.x0[keep],
                        lower=self.lower[keep], upper=self.upper[keep],
                        physical_lower=(self.physical_lower if isinstance(self.physical_lower, bool)
@@ -106,6 +119,10 @@ class Effect:
         free = np.ones(self.n_params, bool)
         free[list(self.fixed)] = False
         return [int(i) for i in np.flatnonzero((at_lo | at_hi) & free)]
+
+    def shapes_of(self, amplitude: int) -> list[int]:
+        """The parameters whose shape ``amplitude`` scales."""
+        return [i for i, a in enumerate(self.amplitude_of) if a == amplitude]
 
     def fix(self, indices: list[int]) -> Effect:
         """The same effect with the parameters ``indices`` held at zero (the fit leaves them

@@ -42,6 +42,7 @@ from serpar.diagnosis.fit import Fit, earns, fit_model
 from serpar.diagnosis.locate import chi2_p
 from serpar.diagnosis.residual import ResidualCheck, check_residual
 from serpar.diagnosis.result import CandidateScore, Diagnosis
+from serpar.diagnosis.rivals import rivals
 from serpar.diagnosis.stability import (
     N_FOLDS,
     assess,
@@ -199,6 +200,14 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
             empirical = characterise(groups, model_refit(family, kept, fixed, groups,
                                                          n_channels),
                                      train, heldout, splits, n_channels, every)
+    # an effect another candidate replaces as well is "A or B", not a finding; the model keeps
+    # it (a model must carry one of the two), and the verdict says which it carries
+    if kept.active:
+        if report:
+            report("rivals")
+        for name, rival in rivals(family, kept, path, scores, fixed, train, heldout).items():
+            demoted[name] = demoted.get(name, ()) + (
+                rival.words() + f"; the model carries {name}",)
     if residual.structured is False and empirical is not None:
         residual, empirical = noise_like_but_explained(residual, empirical)
     # the values from every row where the model holds on the rows it never saw: the split

@@ -52,6 +52,8 @@ MIN_CHANNEL_SHARE = 0.8
 MATCH_RANGE = (0.75, 2.0)
 MATERIAL_CORRECTION = 1.0
 """[sigma, RMS over the held-out rows] A channel the effect changes by less is not judged."""
+SIGNIFICANT = 3.0
+"""An amplitude within this many sigma of zero does not identify the shapes it scales."""
 UNIDENTIFIED = 0.25
 """A parameter on a search bound whose sigma exceeds this share of its search range is one
 the data do not identify: it is held at zero and the model refitted, instead of letting it
@@ -116,7 +118,10 @@ def fit_identified(family: Family, active: tuple[str, ...], train: Rows, heldout
                    start: Mapping[str, NDArray[np.float64]] | None,
                    overrides: Mapping[str, Effect]) -> tuple[Fit, dict[str, Effect]]:
     """:func:`fit_model`, then every parameter on a search bound that the data do not identify
-    (sigma > UNIDENTIFIED of its range) held at zero and the model refitted, until none is."""
+    (sigma > UNIDENTIFIED of its range) held at zero and the model refitted, until none is; a
+    shape parameter (:attr:`Effect.amplitude_of`) on a search bound whose amplitude is within
+    SIGNIFICANT sigma of zero is held with its amplitude (the term is absent there: its shape
+    is not seen)."""
     fixed = dict(overrides)
     fit = fit_model(family, active, train, heldout, start, fixed)
     for _ in range(3):
@@ -124,8 +129,14 @@ def fit_identified(family: Family, active: tuple[str, ...], train: Rows, heldout
         for name in active:
             e = block_of(family, active, name, fixed)
             std = fit.std[name]
-            idx = [i for i in e.pinned(fit.params[name])
+            values = fit.params[name]
+            idx = [i for i in e.pinned(values)
                    if std[i] > UNIDENTIFIED * (e.upper[i] - e.lower[i])]
+            for i in e.pinned(values):  # a shape pinned where its amplitude is nil
+                a = e.amplitude_of[i] if e.amplitude_of else -1
+                if a >= 0 and not abs(values[a]) > SIGNIFICANT * std[a]:
+                    idx += [a, *e.shapes_of(a)]
+            idx = sorted(set(idx))
             if idx:
                 loose[name] = e.fix(idx)
         if not loose:

@@ -213,3 +213,41 @@ def test_an_effect_on_a_small_part_is_judged_on_that_part() -> None:
     path = [fit_model(fam, (), train, held), fit_model(fam, ("probe",), train, held)]
     assert path[0].heldout_chi2 < path[0].n_heldout  # the whole: under the floor
     assert shares(fam, path, held)["probe"][1] > 0.9
+
+
+class TwinLines(Line):
+    """Line with a second candidate, ``creep``, whose shape is the slope's over these data
+    (c (t + 0.001 sin(t)): a creep the data cannot tell from a drift)."""
+
+    def __init__(self, truth: dict[str, float], seed: int = 0) -> None:
+        super().__init__(truth, seed)
+        self.effects += (Effect("creep", "creep", ("c",), ("m/s",), np.zeros(1),
+                                np.full(1, -1.0), np.full(1, 1.0)),)
+
+    def residual(self, params, rows):
+        r = super().residual({k: v for k, v in params.items() if k != "creep"}, rows)
+        if "creep" in params:
+            t = self.t[rows]
+            r = r + params["creep"][0] * (t + 1e-3 * np.sin(t)) / SIGMA
+        return r
+
+
+def test_two_candidates_the_data_cannot_tell_apart_are_a_or_b() -> None:
+    """The drift is found, but the creep explains the held-out rows alike: "slope or creep:
+    these data cannot tell", neither established, the model carrying the one selected; the
+    curve, which the held-out extrapolation tells apart, is no rival of a true slope."""
+    from serpar.diagnosis.rivals import vuong_z
+
+    d = diagnose(TwinLines({"slope": 0.02}))
+    assert d.established == ()
+    (finding,) = d.findings
+    other = ({"slope", "creep"} - {finding.effect}).pop()
+    assert f"{finding.effect} or {other}" in finding.reasons[-1]
+    assert "these data cannot tell" in finding.reasons[-1]
+    assert f"the model carries {finding.effect}" in finding.reasons[-1]
+    assert finding.effect in d.model["params"]
+    clear = diagnose(Line({"slope": 0.02}))
+    assert [f.effect for f in clear.established] == ["slope"]
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(200, 3))
+    assert abs(vuong_z(a, a, 200)) == 0.0 and vuong_z(a, 2 * a, 200) > 5

@@ -61,7 +61,7 @@ def drive_loss(rec: Recording) -> Vec:
 
 def test_out_of_library_effects_are_registered_with_ranges() -> None:
     assert OUT_OF_LIBRARY == ("torque_ripple",)
-    assert WITHHELD == ("stribeck_friction", "encoder_scale")
+    assert WITHHELD == ("stribeck_friction", "encoder_scale", "sigmoid_friction")
     assert set(OUT_OF_LIBRARY + WITHHELD) <= set(EFFECTS)
     assert all(MAGNITUDE_RANGE[e][0] < MAGNITUDE_RANGE[e][1] for e in OUT_OF_LIBRARY + WITHHELD)
 

@@ -28,6 +28,8 @@ Magnitude per effect (drawn from the range in :data:`MAGNITUDE_RANGE` when not g
 | encoder_offset | largest offset [rad] | offsets of joints 2-6 (joint 1's is invisible to dynamics: gravity is along its axis) |
 | link_friction | multiple of a real Panda's friction, as joint_friction | the same Coulomb + viscous friction, acting between the torque sensor and the link (bearings, seals): the sensor reads it, in tau_J as in tau_J_d |
 | stribeck_friction | multiple of a real Panda's friction, as joint_friction | joint_friction's Coulomb + viscous, plus a Stribeck excess (Fs - Fc) exp(-(v/vs)^2) against the motion: Fs/Fc 1.5-2.5, vs 0.02-0.08 rad/s per joint |
+| sigmoid_friction | multiple of a real Panda's friction (Gaz et al. 2019's phi1) | per joint phi1 ±30 %, phi2 the Panda's along the chain ±30 %, phi3 within ±0.05 rad/s: the drive loses phi1 (sigma(phi2 (dq + phi3)) - sigma(phi2 phi3)), no Coulomb or viscous friction beside it |
+| base_tilt | tilt of the base [rad] | its direction (uniform): gravity in the base frame turned by alpha = mag cos(az), beta = mag sin(az) |
 | torque_ripple | amplitude A [N m] of A sin(2 pi q_j / P + phi) in one drive | the joint (2-6), the period P (10-45 deg), the phase |
 | encoder_scale | largest relative scale error abs(s) (encoder reads q (1 + s) about its zero, dq too) | its joint (2-4), the sign; half the time a second, smaller one on another joint of 2-6 |
 | armature | multiple of the joint's rotor inertia (the file's armature; where it has none, half the joint's mean inertia) | per joint 50-150 % of it, on the joints whose rotor the links' inertias do not take (the Panda's 3-7) |
@@ -35,9 +37,9 @@ Magnitude per effect (drawn from the range in :data:`MAGNITUDE_RANGE` when not g
 
 The torque ripple (:data:`OUT_OF_LIBRARY`) has no candidate in the diagnosis library: it should
 come out as a structured residual that no library effect explains, characterised as an
-empirical term. Stribeck friction and encoder scale have candidates; the blind bench also
+empirical term. Stribeck friction, encoder scale and the sigmoid friction have candidates; the blind bench also
 draws them with their candidate withheld (:data:`WITHHELD`), as physics outside the library.
-The answers of these three carry a ``signature``: the channels the residual shows in, the
+The answers of these four carry a ``signature``: the channels the residual shows in, the
 variables it follows, in words.
 """
 
@@ -62,23 +64,25 @@ from serpar.twins.arm_twin_scale import arm_scale
 
 OUT_OF_LIBRARY: tuple[str, ...] = ("torque_ripple",)
 """Effects the diagnosis has no candidate for: they must come out as unexplained residual."""
-WITHHELD: tuple[str, ...] = ("stribeck_friction", "encoder_scale")
+WITHHELD: tuple[str, ...] = ("stribeck_friction", "encoder_scale", "sigmoid_friction")
 """Library effects the blind bench also draws with their candidate withheld from the
 diagnosis: physics outside the library, with a signature to score the empirical term by."""
 PARTLY_IN_LIBRARY: dict[str, tuple[str, ...]] = {
     "stribeck_friction": ("joint_friction",),
     "encoder_scale": ("encoder_offset",),
+    "sigmoid_friction": ("joint_friction",),
 }
 """Library effects that express part of an effect's physics (not a wrong finding when
 established with it, or for it while its candidate is withheld): Stribeck friction's Coulomb
-and viscous levels; a scale error's mean over the joint's travel, a constant offset."""
+and viscous levels; a scale error's mean over the joint's travel, a constant offset; the
+sigmoid's level at speed (a Coulomb friction)."""
 DECLARED: tuple[str, ...] = ("coupled_pair",)
 """Library effects the diagnosis offers only where the recording declares them: a coupled
 drive (its twin writes ``meta.model["couplings"]``)."""
 EFFECTS: tuple[str, ...] = ("joint_friction", "link_friction", "payload", "link_inertia",
                             "torque_sensor", "latency", "sensor_timing", "encoder_offset",
                             "stribeck_friction", "encoder_scale", "armature", "coupled_pair",
-                            *OUT_OF_LIBRARY)
+                            "sigmoid_friction", "base_tilt", *OUT_OF_LIBRARY)
 MAGNITUDE_RANGE: dict[str, tuple[float, float]] = {
     "joint_friction": (0.2, 1.0),
     "link_friction": (0.2, 1.0),
@@ -93,6 +97,8 @@ MAGNITUDE_RANGE: dict[str, tuple[float, float]] = {
     "encoder_scale": (0.005, 0.015),
     "armature": (0.3, 1.0),
     "coupled_pair": (0.5, 1.5),
+    "sigmoid_friction": (0.5, 1.5),
+    "base_tilt": (0.003, 0.015),
 }
 DURATION = 20.0
 DURATION_RANGE = (5.0, 120.0)
@@ -130,6 +136,8 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int,
         reality = Reality(link_side_friction=True, link_side_viscous=viscous, n=arm.n)
     elif effect == "stribeck_friction":
         reality, params, signature = signals.stribeck(spec, magnitude, effect_rng, scale)
+    elif effect == "sigmoid_friction":
+        reality, params, signature = signals.sigmoid(magnitude, effect_rng, scale)
     elif effect == "torque_ripple":
         reality, params, signature = signals.ripple(magnitude, effect_rng, scale)
     elif effect == "encoder_scale":
@@ -142,6 +150,8 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int,
         params = physics.link_inertia(spec, magnitude, effect_rng, scale)
     elif effect == "armature":
         params = physics.armature(spec, magnitude, effect_rng, scale)
+    elif effect == "base_tilt":
+        params = physics.base_tilt(spec, magnitude, effect_rng, scale)
     elif effect is not None:
         reality, params = signals.reality(effect, magnitude, effect_rng, scale)
     run = simulate(_plant(spec), reality, noise, duration, RATE,

@@ -1,6 +1,6 @@
 """The arm-dynamics twin's effects that MuJoCo expresses in the arm's own spec: joint friction
 (``frictionloss`` + ``damping``), a payload body, a link's mass and inertia, rotor inertia
-(``armature``). Sizes and joints per arm: twins/arm_twin_scale.py."""
+(``armature``), a tilted base (the model's gravity turned). Sizes and joints per arm: twins/arm_twin_scale.py."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import mujoco
 import numpy as np
 
 from serpar.sim.physics import PhysicsConfig
+from serpar.sim.tilt import tilted_gravity
 from serpar.twins.arm_twin_scale import ArmScale
 
 
@@ -85,3 +86,14 @@ def armature(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator,
         joint.armature += extra
         out[f"Ia{j + 1}"] = extra
     return out
+
+
+def base_tilt(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator,
+              scale: ArmScale) -> dict[str, float]:
+    """The arm's base off level by ``mag`` rad, in a random direction: the plant's gravity
+    turned as the diagnosis' base_tilt turns it (sim/tilt.py)."""
+    azimuth = rng.uniform(0.0, 2 * np.pi)
+    alpha, beta = mag * np.cos(azimuth), mag * np.sin(azimuth)
+    spec.option.gravity = tilted_gravity(np.array(spec.option.gravity, float),
+                                         np.array([alpha, beta]))[0]
+    return {"alpha": float(alpha), "beta": float(beta)}

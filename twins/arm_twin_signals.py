@@ -1,13 +1,14 @@
 """The arm-dynamics twin's effects that act outside the arm's MjModel, in its sensors and
 drives (sim/plants/arm_reality.py's :class:`Reality`): torque-sensor gain and offset, actuation
-latency, torque-sensor timing, encoder offset and scale, Stribeck friction, a torque ripple, a
-coupled wrist's motor. Sizes and joints per arm: twins/arm_twin_scale.py."""
+latency, torque-sensor timing, encoder offset and scale, Stribeck friction, the published
+sigmoid friction, a torque ripple, a coupled wrist's motor. Sizes and joints per arm: twins/arm_twin_scale.py."""
 
 from __future__ import annotations
 
 import mujoco
 import numpy as np
 
+from serpar.sim.arm import GAZ_FRICTION_PHI
 from serpar.sim.physics import PhysicsConfig
 from serpar.sim.plants.arm_reality import STRIBECK_SMOOTHING, Coupling, Reality
 from serpar.sim.plants.moving_arm import TwinRun
@@ -21,6 +22,8 @@ STRIBECK_SPEED = (0.02, 0.08)
 """Stribeck velocity vs of each drive [rad/s]: below it the friction rises to Fs."""
 RIPPLE_PERIOD_DEG = (10.0, 45.0)
 """Period of the torque ripple in the joint angle [deg] (8-36 per revolution)."""
+SIGMOID_SHIFT = 0.05
+"""[rad/s] Largest |phi3| of the sigmoid twin (Gaz et al.'s Panda: 0.004-0.046)."""
 COUPLED_SPREAD = (0.7, 1.3)
 """Per-parameter scatter of a coupled motor's Iam, fvm, fsm about the magnitude."""
 
@@ -61,6 +64,7 @@ def stribeck(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator, scale: A
     vs = rng.uniform(*STRIBECK_SPEED, n)
     excess = (ratio - 1.0) * fc
     params.update({f"Fs{j + 1}": float(ratio[j] * fc[j]) for j in range(n)})
+    params.update({f"dFs{j + 1}": float(excess[j]) for j in range(n)})  # the diagnosis' names
     params.update({f"vs{j + 1}": float(vs[j]) for j in range(n)})
     order = np.argsort(-excess)
     j = int(order[0]) + 1
@@ -78,6 +82,33 @@ def stribeck(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator, scale: A
         width = np.maximum(STRIBECK_SMOOTHING, 2.0 * h * excess / scale.plant.inertia_min)
     return (Reality(stribeck_excess=excess, stribeck_speed=vs, stribeck_width=width, n=n),
             params, signature)
+
+
+def sigmoid(mag: float, rng: np.random.Generator, scale: ArmScale
+            ) -> tuple[Reality, dict[str, object], dict[str, object]]:
+    """Drive friction in the published Panda form (Gaz et al. 2019): per joint phi1 = twice the
+    Coulomb level of reference times the magnitude (+-30 %), phi2 = the Panda's steepness along
+    the chain (+-30 %), phi3 within +-SIGMOID_SHIFT. It replaces Coulomb + viscous friction:
+    the plant has no frictionloss, the drive loses the sigmoid (sim/plants/arm_reality.py)."""
+    n = scale.n
+    phi1 = 2.0 * mag * scale.coulomb * rng.uniform(0.7, 1.3, n)
+    phi2 = np.interp(np.linspace(0.0, 6.0, n), np.arange(7.0), GAZ_FRICTION_PHI[1]) * rng.uniform(
+        0.7, 1.3, n)
+    phi3 = rng.uniform(-SIGMOID_SHIFT, SIGMOID_SHIFT, n)
+    h = PhysicsConfig().timestep  # explicit: its slope at rest, over one step, stays small
+    phi2 = np.minimum(phi2, 0.5 * scale.plant.inertia_min / (h * np.maximum(phi1, 1e-12) / 4))
+    params: dict[str, object] = {}
+    for k, phi in enumerate((phi1, phi2, phi3)):
+        params.update({f"phi{k + 1}_{j + 1}": float(phi[j]) for j in range(n)})
+    order = np.argsort(-phi1)
+    j = int(order[0]) + 1
+    words = (f"every drive loses a smooth friction, a level phi1 / 2 at speed about an offset, "
+             f"through zero at rest over ~1 / phi2 rad/s; joint {j} most ({phi1[j - 1]:.2f} N m "
+             f"swing, {1 / phi2[j - 1]:.3f} rad/s): in the command (tau_J_d), not in the "
+             "link-side sensor")
+    signature: dict[str, object] = {"channels": [f"tau_J_d{i + 1}" for i in order],
+                                    "variables": [f"dq{j}"], "words": words}
+    return Reality(sigmoid_phi=np.stack([phi1, phi2, phi3]), n=n), params, signature
 
 
 def ripple(mag: float, rng: np.random.Generator, scale: ArmScale

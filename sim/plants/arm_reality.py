@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import expit
 
 from serpar.errors import ConfigError
 from serpar.sim.arm import N_JOINTS
@@ -112,6 +113,10 @@ class Reality:
     """The part of each joint's damping [N m s/rad] that acts on the link side of the sensor."""
     coupling: Coupling | None = None
     """A coupled drive's extra torque (None: every joint has its own motor only)."""
+    sigmoid_phi: Vec | None = None
+    """Drive friction in the published Panda form (3 x n: phi1 [N m], phi2 [s/rad], phi3 [rad/s]
+    per joint; sim/plants/drive_friction.py): the drive loses
+    phi1 (sigma(phi2 (dq + phi3)) - sigma(phi2 phi3)). None: none."""
     stribeck_width: Vec | None = None
     """Per-joint width of the smoothed signs [rad/s] (None: :data:`STRIBECK_SMOOTHING` on every
     joint); a light joint needs a wider one to stay stable (sim/plants/moving_arm.py)."""
@@ -134,6 +139,13 @@ class Reality:
                 raise ConfigError(f"Reality.stribeck_width needs {n} values in "
                                   f"{STRIBECK_SMOOTHING:g}..1 rad/s")
             object.__setattr__(self, "stribeck_width", w)
+        if self.sigmoid_phi is not None:
+            phi = np.asarray(self.sigmoid_phi, float)
+            if (phi.shape != (3, n) or not np.all(np.isfinite(phi)) or np.any(phi[0] < 0)
+                    or np.any(phi[1] <= 0)):
+                raise ConfigError(f"Reality.sigmoid_phi needs 3 x {n} finite values, phi1 >= 0 "
+                                  "and phi2 > 0")
+            object.__setattr__(self, "sigmoid_phi", phi)
         if not 0.0 <= self.delay <= 0.02:
             raise ConfigError(f"Reality.delay={self.delay} s outside 0..0.02 s")
         if not 0.0 <= self.sensor_lag <= 0.005:
@@ -152,10 +164,14 @@ class Reality:
     def drive_torque(self) -> Callable[..., Vec] | None:
         """The drive's torque beyond its command at true (q, dq) and the last step's
         acceleration ddq [N m], or None without one (the simulation then skips it): Stribeck
-        friction, position ripple, a coupled motor."""
+        friction, the published sigmoid friction, position ripple, a coupled motor."""
         stribeck = bool(np.any(self.stribeck_excess > 0))
-        if not stribeck and not self.ripple and self.coupling is None:
+        sigmoid = self.sigmoid_phi
+        if not stribeck and not self.ripple and self.coupling is None and sigmoid is None:
             return None
+        if sigmoid is not None:
+            phi1, phi2, phi3 = sigmoid
+            at_rest = expit(phi2 * phi3)
         neg_excess, inv_speed = -self.stribeck_excess, 1.0 / self.stribeck_speed
         inv_width = (1.0 / STRIBECK_SMOOTHING if self.stribeck_width is None
                      else 1.0 / self.stribeck_width)
@@ -174,6 +190,8 @@ class Reality:
                 out = neg_excess * np.exp(-x * x) * np.tanh(dq * inv_width)
             else:
                 out = np.zeros(n)
+            if sigmoid is not None:  # explicit: its slope phi1 phi2 / 4 is a few N m s/rad
+                out -= phi1 * (expit(phi2 * (dq + phi3)) - at_rest)
             if len(joint):
                 out[joint] += amp * np.sin(wavenumber * q[joint] + phase)
             if c is not None:
