@@ -50,10 +50,11 @@ from serpar.sim.plants.from_model_file import (
 from serpar.sim.rigid_arm import ArmModel
 from serpar.sim.robot_dynamics import dynamics_model
 from serpar.sim.robot_file import read_spec
+from serpar.sim.tilt import tilted_gravity
 
 PAYLOAD_NAME = "serpar_payload"
 EXPRESSED = ("joint_friction", "link_friction", "armature", "payload", "link_inertia",
-             "encoder_offset")
+             "encoder_offset", "base_tilt")
 WHY_NOT: dict[str, str] = {
     **NOT_APPLICABLE,
     "latency": "an actuation delay is an actuator's delay, and serpar's model of the arm keeps "
@@ -61,6 +62,8 @@ WHY_NOT: dict[str, str] = {
     "sensor_timing": "a torque sensor's delay, and serpar's model of the arm has no sensors",
     "stribeck_friction": "MuJoCo's frictionloss is one dry level (the Coulomb part, from "
                          "joint_friction): a fall with speed has no MJCF form",
+    "sigmoid_friction": "MuJoCo's frictionloss is one dry level, symmetric about zero speed: a "
+                        "sigmoid with an offset has no MJCF form",
     "coupled_pair": "one motor turning two joints loads one joint's drive with another joint's "
                     "motion; a MuJoCo joint's armature and friction act on its own motion only",
     "geometric": "serpar's geometric parameters are errors of MD-H frames; the file's link "
@@ -196,6 +199,10 @@ def robot_plant(model: DiagnosisModel, robot: str | Path) -> tuple[RobotPlant, s
             joints[j - 1].ref += float(np.degrees(value)) if degree else value
     if "link_inertia" in model.effects:
         _links(spec, arm, model, notes)
+    if "base_tilt" in model.effects:  # the base is the world here: gravity turns in it
+        p = model.block("base_tilt").as_dict()
+        spec.option.gravity = tilted_gravity(np.array(spec.option.gravity, float),
+                                             np.array([p["alpha"], p["beta"]]))[0]
     payload = _payload(spec, arm, model, notes) if "payload" in model.effects else ""
     applied = tuple(e for e in model.effects if e in EXPRESSED)
     not_expressed = [f"{e}: {why_not(e)}" for e in model.effects if e not in EXPRESSED]

@@ -30,6 +30,7 @@ NOT_HELD = {
                     "scales them)",
     "encoder_offset": "a URDF joint has no reference angle MuJoCo reads (the MJCF export "
                       "writes joint ref)",
+    "base_tilt": "a URDF has no gravity (the MJCF export turns <option gravity>)",
 }
 
 

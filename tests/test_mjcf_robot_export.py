@@ -24,6 +24,7 @@ from serpar.sim.mjcf_writer import mjcf_text, precise_tree
 from serpar.sim.model_file import parse_model
 from serpar.sim.plants.arm_changes import EXTENT, ArmPlantChanges, inertia_from_extent
 from serpar.sim.robot_dynamics import dynamics_model, dynamics_spec
+from serpar.sim.tilt import tilted_gravity
 from serpar.sim.urdf_export import export_urdf
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
@@ -44,13 +45,14 @@ def _block(names: list[str], values: np.ndarray | list[float]) -> dict[str, list
 
 
 def _model(n: int, seed: int = 0) -> dict:
-    """joint_friction, armature, payload and link_inertia at values of no round decimal form;
-    coupled_pair and latency, which MJCF cannot express for a file's arm; a baseline block."""
+    """joint_friction, armature, payload, link_inertia and base_tilt at values of no round
+    decimal form; coupled_pair, latency and sigmoid_friction, which MJCF cannot express for a
+    file's arm; a baseline block."""
     rng = np.random.default_rng(seed)
     j = range(1, n + 1)
     return {"source": "test", "kind": "arm_dynamics",
             "effects": ["joint_friction", "armature", "payload", "link_inertia", "coupled_pair",
-                        "latency"],
+                        "latency", "base_tilt", "sigmoid_friction"],
             "params": {
                 "joint_friction": _block([f"Fc{i}" for i in j] + [f"Fv{i}" for i in j],
                                          rng.uniform(0.1, 2.0, 2 * n)),
@@ -59,6 +61,9 @@ def _model(n: int, seed: int = 0) -> dict:
                 "link_inertia": _block([f"link{i}" for i in j], rng.normal(0.0, 0.05, n)),
                 "coupled_pair": _block(["Iam6", "fvm6", "fsm6"], [0.01, 0.2, 0.3]),
                 "latency": _block(["delay"], [0.0012]),
+                "base_tilt": _block(["alpha", "beta"], [0.0123456789, -0.00456789123]),
+                "sigmoid_friction": _block([f"phi{k}_{i}" for k in (1, 2, 3) for i in j],
+                                           rng.uniform(0.01, 1.0, 3 * n)),
                 "torque_tare": _block([f"tare{i}" for i in j], rng.normal(0.0, 0.1, n))},
             "evidence": {"joint_friction": "explains 91.2 % of the held-out residual"}}
 
@@ -73,9 +78,9 @@ def test_the_arm_round_trips_exactly_with_its_effects_in_view(robot: str, tmp_pa
     model = parse_model(_model(arm.n), "m")
     out = export_mjcf(model, tmp_path / "deep" / "arm.xml", robot)
     assert (out.round_trip_max, out.round_trip_field, out.kept) == (0.0, "", ())
-    assert out.applied == ("joint_friction", "armature", "payload", "link_inertia")
+    assert out.applied == ("joint_friction", "armature", "payload", "link_inertia", "base_tilt")
     assert [n.split(":")[0] for n in out.not_expressed] == ["coupled_pair", "latency",
-                                                            "torque_tare"]
+                                                            "sigmoid_friction", "torque_tare"]
     here = os.getcwd()
     try:
         os.chdir("/")  # plain MuJoCo, another working directory
@@ -83,6 +88,8 @@ def test_the_arm_round_trips_exactly_with_its_effects_in_view(robot: str, tmp_pa
     finally:
         os.chdir(here)
     nominal, p = _nominal(robot), model.block("joint_friction").as_dict()
+    np.testing.assert_array_equal(m.opt.gravity, tilted_gravity(nominal.opt.gravity,
+                                                                model.block("base_tilt").values)[0])
     for j, name in enumerate(arm.joint_names, 1):  # every value bit for bit
         d, d0 = m.joint(name).dofadr[0], nominal.joint(name).dofadr[0]
         assert m.dof_frictionloss[d] == p[f"Fc{j}"]
@@ -204,7 +211,8 @@ def test_the_urdf_holds_the_friction_mujoco_reads(robot: str, tmp_path) -> None:
     out = export_urdf(model, robot, tmp_path / "arm.urdf")
     assert len(out.joints) == 6
     assert [n.split(":")[0] for n in out.not_held] == ["armature", "payload", "link_inertia",
-                                                       "coupled_pair", "latency"]
+                                                       "coupled_pair", "latency", "base_tilt",
+                                                       "sigmoid_friction"]
     a, b = mujoco.MjModel.from_xml_path(str(xml.path)), dynamics_model(out.path).model
     for name in out.joints:  # what MuJoCo reads from <dynamics>: the MJCF's values exactly
         assert a.dof_frictionloss[a.joint(name).dofadr[0]] == b.dof_frictionloss[b.joint(name).dofadr[0]]

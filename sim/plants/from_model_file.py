@@ -54,6 +54,11 @@ NOT_APPLICABLE: dict[str, str] = {
     "stribeck_friction": "MuJoCo's frictionloss is one dry level (the Coulomb part, from "
                          "joint_friction): a fall with speed needs a drive torque the cell's "
                          "arm does not model",
+    "sigmoid_friction": "per-joint sigmoid friction (phi1..phi3) is not yet mapped onto the "
+                        "cell's arm, whose drive friction runs Gaz et al.'s own phi at one scale "
+                        "(the episode config's arm_friction_form: gaz)",
+    "base_tilt": "a tilted arm base is not yet mapped onto the cell's arm mount (turning the "
+                 "cell's gravity would tilt the platform and the plate too)",
     "encoder_scale": "a transmission-ratio error between reading and link: a MuJoCo hinge has no "
                      "gear between its qpos and the link angle",
     "armature": "a rotor-inertia change is not yet mapped onto the cell's arm (its armature "
