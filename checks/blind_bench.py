@@ -13,7 +13,9 @@ trial an established finding that is neither the hidden effect nor a library eff
 expresses part of the same physics (the twin module's ``PARTLY_IN_LIBRARY``, e.g. the Coulomb
 part of Stribeck friction) counts as a wrong finding (target: none). Held-out whitened RMS
 after the fit (1 = noise; target <= 1.5 where sigma is stated right) and the diagnosis wall
-time are reported. A trial that raises is recorded with its error and scored as a miss.
+time are reported. A trial that raises is recorded with its error and scored as a miss. A
+hidden effect the diagnosis reports as one side of "A or B: these data cannot tell" is neither
+right nor wrong: counted (``a_or_b``) and left out of its kind's share.
 """
 
 from __future__ import annotations
@@ -63,6 +65,9 @@ class Trial:
     """The empirical term's groups as "channel / variable / shape", first entered first."""
     empirical_rms: float | None = None
     """Held-out whitened RMS with the empirical term (None: no term)."""
+    undecided: bool = False
+    """The hidden effect is one side of an "A or B: these data cannot tell" finding: neither
+    right nor wrong (left out of its kind's share)."""
 
     @property
     def kind(self) -> str:
@@ -173,7 +178,15 @@ def run_trial(index: int, domain: str, effect: str, magnitude: float, seed: int,
     return Trial(index, seed, domain, label, magnitude, diag.top_effect, diag.verdict,
                  bool(correct), diag.heldout_rms_after, wall, None, sigma_error, established,
                  tuple(f.effect for f in diag.suspected), ratio, outside, acceptable,
-                 characterised, emp_rms)
+                 characterised, emp_rms,
+                 undecided=(hidden is not None and not outside and not correct
+                            and _a_or_b_holds(diag.suspected, hidden)))
+
+
+def _a_or_b_holds(suspected: tuple, hidden: str) -> bool:
+    """Whether an "A or B: these data cannot tell" finding names ``hidden`` as A or B."""
+    return any("these data cannot tell" in r and (f.effect == hidden or f" or {hidden} (" in r)
+               for f in suspected for r in f.reasons)
 
 
 KINDS = {"effect": "hidden effect in the library: established, after nothing but parts of its "
@@ -202,13 +215,15 @@ def summarise(trials: list[Trial]) -> dict[str, object]:
         e["rms_ratios"].append(t.heldout_rms_ratio)  # type: ignore[union-attr]
 
     def share(ts: list[Trial]) -> float | None:
-        return float(np.mean([t.correct for t in ts])) if ts else None
+        decided = [t.correct for t in ts if not t.undecided]
+        return float(np.mean(decided)) if decided else None
 
     rows = {}
     for kind, words in KINDS.items():
         ts = [t for t in trials if t.kind == kind]
         r = np.array([t.heldout_rms_ratio for t in ts if np.isfinite(t.heldout_rms_ratio)])
         rows[kind] = {"what": words, "trials": len(ts), "correct": share(ts), "target": TARGETS[kind],
+                      "a_or_b": sum(t.undecided for t in ts),
                       "wrong_findings_established": sum(t.wrong_finding for t in ts),
                       "heldout_rms_median": float(np.median(r)) if r.size else None,
                       "heldout_rms_max": float(r.max()) if r.size else None}

@@ -53,7 +53,7 @@ def cmd_blind_bench(args: argparse.Namespace) -> int:
                   f"/{t.sigma_error:g}" if t.sigma_error != 1 else "right",
                   f"{t.magnitude:.3g}", ", ".join(t.established) or "-",
                   ", ".join(t.suspected) or "-", t.characterised[0] if t.characterised else "-",
-                  "yes" if t.correct else "NO",
+                  "A or B" if t.undecided else "yes" if t.correct else "NO",
                   f"{t.heldout_rms_ratio:.3g}" + ("" if t.empirical_rms is None
                                                   else f" ({t.empirical_rms:.3g} with term)"),
                   "-" if t.noise_ratio is None else f"{t.noise_ratio:.2f}",
@@ -63,9 +63,9 @@ def cmd_blind_bench(args: argparse.Namespace) -> int:
         return "-" if x is None else f"{100 * float(x):.0f} %"  # type: ignore[arg-type]
 
     rows = summary["rows"]
-    print(table(["trials", "n", "correct", "target", "wrong findings established",
-                 "held-out RMS/noise median / max"],
-                [[r["what"], r["trials"], pct(r["correct"]), f">= {pct(r['target'])}",
+    print(table(["trials", "n", "A or B", "correct (of the rest)", "target",
+                 "wrong findings established", "held-out RMS/noise median / max"],
+                [[r["what"], r["trials"], r["a_or_b"], pct(r["correct"]), f">= {pct(r['target'])}",
                   r["wrong_findings_established"],
                   "-" if r["heldout_rms_median"] is None else
                   f"{r['heldout_rms_median']:.3g} / {r['heldout_rms_max']:.3g}"

@@ -205,7 +205,8 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
     if kept.active:
         if report:
             report("rivals")
-        for name, rival in rivals(family, kept, path, scores, fixed, train, heldout).items():
+        for name, rival in rivals(family, kept, path, scores, fixed, train, heldout,
+                                  splits).items():
             demoted[name] = demoted.get(name, ()) + (
                 rival.words() + f"; the model carries {name}",)
     if residual.structured is False and empirical is not None:

@@ -15,7 +15,7 @@ def test_kinds_filter_the_draws_and_library_only_is_their_alias() -> None:
     outside = plan(40, 0, ("stewart", "arm_dynamics"), kinds=("outside",))
     allowed = ({e + WITHHELD for e in stewart_twin.WITHHELD + arm_dynamics_twin.WITHHELD}
                | set(arm_dynamics_twin.OUT_OF_LIBRARY))
-    assert {e for _, e, *_ in outside} == allowed  # 40 draws over 5 choices: all seen
+    assert {e for _, e, *_ in outside} == allowed  # 40 draws over 6 choices: all seen
     quiet = plan(30, 1, ("stewart",), kinds=("none", "wrong_sigma"))
     assert {e for _, e, *_ in quiet} == {"none", WRONG}
     assert plan(60, 2, ("stewart", "arm_dynamics"), library_only=True) == plan(
@@ -55,3 +55,22 @@ def test_stribeck_friction_is_right_after_its_coulomb_part() -> None:
     assert t.error is None and t.kind == "effect"
     assert t.established[:2] == ("joint_friction", "stribeck_friction"), t.verdict
     assert t.correct and not t.wrong_finding
+
+
+def test_an_a_or_b_trial_is_neither_right_nor_wrong() -> None:
+    """A hidden effect reported as one side of "A or B: these data cannot tell" is counted
+    apart and left out of its kind's share; a wrong name still counts against it."""
+    from serpar.checks.blind_bench import Trial, _a_or_b_holds, summarise
+    from serpar.diagnosis.result import Finding
+
+    def trial(correct: bool, undecided: bool = False) -> Trial:
+        return Trial(0, 0, "arm_dynamics", "payload", 1.0, None, "", correct, 1.0, 1.0,
+                     undecided=undecided)
+
+    rows = summarise([trial(True), trial(False, undecided=True), trial(False)])["rows"]
+    assert rows["effect"]["a_or_b"] == 1 and rows["effect"]["correct"] == 0.5
+    reason = ("link_inertia or payload (unmodelled payload): these data cannot tell (...); "
+              "the model carries link_inertia")
+    f = Finding(1, "link_inertia", "", (), 0.5, -10.0, 10.0, established=False, reasons=(reason,))
+    assert _a_or_b_holds((f,), "payload") and _a_or_b_holds((f,), "link_inertia")
+    assert not _a_or_b_holds((f,), "armature")
