@@ -7,6 +7,7 @@ import os
 import sys
 
 from serpar.checks.bench import BenchConfig, run_bench
+from serpar.checks.bench_diagnose import diagnose_bench
 from serpar.checks.bench_episode import against_goals, episode_bench
 from serpar.checks.bench_montecarlo import montecarlo_bench
 from serpar.cli.output import print_json, progress, table
@@ -26,6 +27,9 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="also time serpar montecarlo: one batch of 32 insertion trials at 1 thread "
                         "and at every core, trials/s, the scaling and the overhead over bare batched "
                         "stepping, and a trial scene's build in place and in processes (adds ~2 min)")
+    p.add_argument("--diagnose", action="store_true",
+                   help="also time serpar diagnose on a 60-s arm-dynamics twin with a mix of "
+                        "concealed effects, full candidate library (adds ~2-4 min)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_bench)
     return p
@@ -34,7 +38,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def cmd_bench(args: argparse.Namespace) -> int:
     cfg = BenchConfig(sim_seconds=args.seconds, repeats=args.repeats)
     threads = tuple(sorted({1, os.cpu_count() or 1}))
-    bar = progress(5 + 3 * args.episode + (len(threads) + 1) * args.montecarlo, "bench",
+    bar = progress(5 + 3 * args.episode + (len(threads) + 1) * args.montecarlo
+                   + 2 * args.diagnose, "bench",
                    enabled=sys.stderr.isatty())
 
     def tick(name: str) -> None:
@@ -47,6 +52,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
         report["episode"] = episode_bench(tick=tick)
     if args.montecarlo:
         report["montecarlo"] = montecarlo_bench(threads=threads, tick=tick)
+    if args.diagnose:
+        report["diagnose"] = diagnose_bench(tick=tick)
     bar.close()
     report["goals"] = against_goals(report)
     if args.json:
@@ -85,6 +92,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
         print(table(["trial scene built", "ms per trial"],
                     [["in place" if w == "1" else f"ahead on {w} processes", f"{ms:.1f}"]
                      for w, ms in mc["scene_build_ms"].items()]))
+    if args.diagnose:
+        dg = report["diagnose"]
+        print(table(["diagnosis", "wall s", "candidates", "concealed", "established"],
+                    [[dg["recording"], f"{dg['diagnosis_s']:.1f}", dg["candidates"],
+                      ", ".join(dg["concealed"]), ", ".join(dg["established"]) or "-"]]))
     goals = report["goals"]
     print(table(["figure", "measured", "goal", ""],
                 [[g["label"], f"{g['value']:.2f}", g["goal"], "met" if g["met"] else "SHORT"] for g in goals.values()]))

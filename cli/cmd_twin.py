@@ -25,7 +25,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                                     "(truth in answer.json)")
     p.add_argument("--effect", required=True,
                    help="an effect name (serpar twin --effect list shows them) or none; with "
-                        "--domain cell also mix (two to four drawn effects)")
+                        "--domain cell also mix (two to four drawn effects), with --domain "
+                        "arm_dynamics also mix (one friction form and two other effects)")
     p.add_argument("--domain", help="arm_static, arm_dynamics, stewart, stewart_motion, or cell: "
                                     "an assembly episode of a cell with concealed physics, "
                                     "recorded as serpar run --record does (needed only with "
@@ -57,7 +58,7 @@ def cmd_twin(args: argparse.Namespace) -> int:
     if args.effect == "list":
         table = effects()
         print("none (any domain), " + ", ".join(f"{e} ({d})" for e, d in table.items())
-              + "; --domain cell: mix, " + ", ".join(CELL_EFFECTS))
+              + "; --domain arm_dynamics: mix; --domain cell: mix, " + ", ".join(CELL_EFFECTS))
         return 0
     if not args.out:
         raise ConfigError("--out DIR is required (the recording goes there, the truth to "

@@ -5,7 +5,9 @@ rate and windowed exactly like the channel they act on.
 - periodic in q_j: sin and cos of 2 pi q_j / P, P = 360 deg / k for k = 1, 1.5, ... 40 (half a
   cycle per turn apart: over the ~1 rad a joint sweeps, the nearest grid period slips less
   than 0.05 of a cycle from any true one);
-- a step at reversals of q_j: tanh(dq_j / 0.01 rad/s);
+- a step at reversals of q_j: tanh(dq_j / v_t), a sharp one (v_t 0.01 rad/s: dry friction)
+  and smooth ones with the joint's own transition speed v_t in TRANSITION_SPEEDS (a
+  friction that passes through zero at rest over 1 / phi2, the published sigmoid's);
 - a fall from standstill: sign(dq_j) exp(-(dq_j / v_s)^2) for v_s in STRIBECK_SPEEDS;
 - a drift in time: linear, or saturating 1 - exp(-t / tau).
 
@@ -28,7 +30,9 @@ CYCLES_PER_TURN = np.arange(1.0, 40.01, 0.5)
 STRIBECK_SPEEDS = (0.02, 0.05, 0.1, 0.2)
 """[rad/s] Stribeck velocities tried (published Panda fits: 0.01-0.1 rad/s)."""
 REVERSAL_SPEED = 0.01
-"""[rad/s] Width of the step at reversal (the diagnosis' stick velocity)."""
+"""[rad/s] Width of the sharp step at reversal (the diagnosis' stick velocity)."""
+TRANSITION_SPEEDS = (0.03, 0.1, 0.3)
+"""[rad/s] Widths of the smooth steps (Gaz et al.'s Panda: 1 / phi2 = 0.06-0.2 rad/s)."""
 DRIFT_TAUS = (1 / 6, 1 / 3)
 """Time constants of the saturating drifts, as shares of the recording's length."""
 
@@ -65,8 +69,10 @@ def arm_library(t: Terms, channels: tuple[str, ...], blocks: tuple[str, ...]) ->
                                   f"sin, cos(2 pi {qj} / {360 / k:.4g} deg)", column,
                                   window(np.column_stack([np.sin(phase), np.cos(phase)])), s,
                                   {"period_deg": 360.0 / k}))
-            out.append(_group(name, vj, "reversal step", f"tanh({vj} / {REVERSAL_SPEED} rad/s)",
-                              column, window(np.tanh(v[:, j] / REVERSAL_SPEED)[:, None]), s))
+            for vt in (REVERSAL_SPEED, *TRANSITION_SPEEDS):
+                out.append(_group(name, vj, "reversal step", f"tanh({vj} / {vt} rad/s)",
+                                  column, window(np.tanh(v[:, j] / vt)[:, None]), s,
+                                  {"speed": vt}))
             for vs in STRIBECK_SPEEDS:
                 bump = np.sign(v[:, j]) * np.exp(-((v[:, j] / vs) ** 2))
                 out.append(_group(name, vj, "stribeck", f"sign({vj}) exp(-({vj} / {vs} rad/s)^2)",

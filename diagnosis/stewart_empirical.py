@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 Vec = NDArray[np.float64]
 Rows = NDArray[np.int64]
 
-DRIFT_TAUS = (1 / 12, 1 / 6, 1 / 3)
+DRIFT_TAUS = (1 / 24, 1 / 12, 1 / 6, 1 / 3, 2 / 3)
 """Time constants of the saturating drifts, as shares of the campaign's length."""
 
 

@@ -239,3 +239,35 @@ def test_the_published_friction_form_and_a_tilted_base_are_named_and_recovered(
     # what is left is the data's own noise (sample-to-sample differences: the iiwa14's 1.05 x)
     r = diag.residual
     assert r.rms < 1.1 * max(1.0, r.noise_ratio or 1.0), diag.verdict
+
+
+def test_the_mix_twin_draws_one_friction_form_and_two_others() -> None:
+    """``--effect mix`` of the arm-dynamics twin: one friction form and two other effects,
+    each at its own drawn size, their parameters together in the answer; the sigmoid friction
+    and the latency of one mix both act (the drive carries both: neither replaced the other
+    when their signal effects were merged). --magnitude is refused (each effect draws its own)."""
+    from serpar.twins.arm_dynamics_twin import MAGNITUDE_RANGE, MIX_FRICTION, MIX_POOL
+
+    seen = set()
+    for seed in range(4):
+        _, answer = make_twin("mix", None, seed, duration=5.0)
+        parts = answer["effects"]
+        names = [p["effect"] for p in parts]
+        assert len(names) == 3 and sum(n in MIX_FRICTION for n in names) == 1
+        assert all(n in MIX_FRICTION + MIX_POOL for n in names)
+        for p in parts:
+            lo, hi = MAGNITUDE_RANGE[p["effect"]]
+            assert lo <= p["magnitude"] <= hi
+            assert all(answer["params"][k] == v for k, v in p["params"].items())
+        seen.update(names)
+    assert len(seen) >= 4
+    with pytest.raises(ConfigError, match="mix draws each"):
+        make_twin("mix", 1.0, 0, duration=5.0)
+
+
+def test_merged_signal_effects_keep_each_others_fields() -> None:
+    from serpar.twins.arm_dynamics_twin import _merged
+
+    phi = np.array([[0.5] * 7, [10.0] * 7, [0.01] * 7])
+    both = _merged(_merged(Reality(), Reality(sigmoid_phi=phi)), Reality(delay=0.002))
+    assert both.delay == 0.002 and np.array_equal(both.sigmoid_phi, phi)

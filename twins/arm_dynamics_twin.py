@@ -46,7 +46,9 @@ variables it follows, in words.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import fields, replace
 
+import mujoco
 import numpy as np
 import pyarrow as pa
 
@@ -60,7 +62,7 @@ from serpar.sim.rigid_arm import PANDA_ARM, ArmModel
 from serpar.twins import arm_twin_physics as physics
 from serpar.twins import arm_twin_signals as signals
 from serpar.twins.arm_twin_physics import plant_model as _plant
-from serpar.twins.arm_twin_scale import arm_scale
+from serpar.twins.arm_twin_scale import ArmScale, arm_scale
 
 OUT_OF_LIBRARY: tuple[str, ...] = ("torque_ripple",)
 """Effects the diagnosis has no candidate for: they must come out as unexplained residual."""
@@ -100,6 +102,11 @@ MAGNITUDE_RANGE: dict[str, tuple[float, float]] = {
     "sigmoid_friction": (0.5, 1.5),
     "base_tilt": (0.003, 0.015),
 }
+MIX = "mix"
+MIX_FRICTION: tuple[str, ...] = ("joint_friction", "sigmoid_friction")
+MIX_POOL: tuple[str, ...] = ("payload", "link_inertia", "base_tilt", "armature", "latency",
+                             "encoder_offset")
+"""``mix``: one friction form and two of these, each at a magnitude drawn from its range."""
 DURATION = 20.0
 DURATION_RANGE = (5.0, 120.0)
 RATE = 1000.0
@@ -110,55 +117,41 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int,
               arm: ArmModel = PANDA_ARM) -> tuple[Recording, dict[str, object]]:
     """A recording of a "real" ``arm`` with `effect` (None: the nominal arm), and the answer."""
     noise = noise or SensorNoise()
-    if effect is not None and effect not in EFFECTS:
-        raise ConfigError(f"unknown effect {effect!r}; valid: {', '.join(EFFECTS)} (or none)")
+    if effect is not None and effect not in (*EFFECTS, MIX):
+        raise ConfigError(f"unknown effect {effect!r}; valid: {', '.join(EFFECTS)}, {MIX} "
+                          "(or none)")
     lo, hi = DURATION_RANGE
     if not lo <= duration <= hi:
         raise ConfigError(f"duration {duration} s outside {lo:g}..{hi:g} s")
     if arm.n < 2 and effect == "coupled_pair":
         raise ConfigError(f"coupled_pair needs two joints; {arm.name} has {arm.n}")
     effect_rng, sim_seed = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
-    if effect is not None and magnitude is None:
+    if effect == MIX and magnitude is not None:
+        raise ConfigError("--magnitude is per effect; mix draws each of its effects' own")
+    if effect is not None and effect != MIX and magnitude is None:
         magnitude = float(effect_rng.uniform(*MAGNITUDE_RANGE[effect]))
     if magnitude is not None and not (np.isfinite(magnitude) and magnitude > 0):
         raise ConfigError(f"magnitude {magnitude} must be a positive number")
     scale = arm_scale(arm)
     spec = plant_spec(arm)
-    params: Mapping[str, object] = {}
     reality = Reality(n=arm.n)
     signature: dict[str, object] | None = None
     couplings: list[list[int]] = []
-    if effect == "joint_friction":
-        params = physics.friction(spec, magnitude, effect_rng, scale)
-    elif effect == "link_friction":
-        params = physics.friction(spec, magnitude, effect_rng, scale)
-        viscous = np.array([params[f"Fv{j + 1}"] for j in range(arm.n)])
-        reality = Reality(link_side_friction=True, link_side_viscous=viscous, n=arm.n)
-    elif effect == "stribeck_friction":
-        reality, params, signature = signals.stribeck(spec, magnitude, effect_rng, scale)
-    elif effect == "sigmoid_friction":
-        reality, params, signature = signals.sigmoid(magnitude, effect_rng, scale)
-    elif effect == "torque_ripple":
-        reality, params, signature = signals.ripple(magnitude, effect_rng, scale)
-    elif effect == "encoder_scale":
-        reality, params = signals.encoder_scale(magnitude, effect_rng, scale)
-    elif effect == "coupled_pair":
-        reality, params, couplings = signals.coupled_pair(spec, magnitude, effect_rng, scale)
-    elif effect == "payload":
-        params = physics.payload(spec, magnitude, effect_rng, scale)
-    elif effect == "link_inertia":
-        params = physics.link_inertia(spec, magnitude, effect_rng, scale)
-    elif effect == "armature":
-        params = physics.armature(spec, magnitude, effect_rng, scale)
-    elif effect == "base_tilt":
-        params = physics.base_tilt(spec, magnitude, effect_rng, scale)
-    elif effect is not None:
-        reality, params = signals.reality(effect, magnitude, effect_rng, scale)
+    parts: list[dict[str, object]] = []
+    for name in (_mix_draw(effect_rng) if effect == MIX else (effect,) if effect else ()):
+        size = (float(effect_rng.uniform(*MAGNITUDE_RANGE[name])) if effect == MIX
+                else magnitude)
+        part, params, sig, coupled = _apply(name, spec, size, effect_rng, scale)
+        reality = _merged(reality, part)
+        signature, couplings = sig or signature, coupled or couplings
+        parts.append({"effect": name, "magnitude": size, "params": params})
+    params = {k: v for p in parts for k, v in p["params"].items()}  # type: ignore[attr-defined]
     run = simulate(_plant(spec), reality, noise, duration, RATE,
                    int(sim_seed.integers(2**31)), arm=arm)
     if effect == "encoder_scale":
         signature = signals.scale_signature(reality, run, RATE, scale)
     answer: dict[str, object] = {"effect": effect, "magnitude": magnitude, "params": params,
+                                 **({"effects": parts} if effect == MIX else {}),
                                  "torque_offset": [float(b) for b in run.torque_offset],
                                  "saturated_samples": run.saturated}
     if not arm.is_panda:
@@ -166,6 +159,64 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int,
     if signature is not None:
         answer["signature"] = signature
     return _recording(run, noise, arm, couplings), answer
+
+
+def _apply(effect: str, spec: mujoco.MjSpec, magnitude: float | None, rng: np.random.Generator,
+           scale: ArmScale) -> tuple[Reality, Mapping[str, object], dict[str, object] | None,
+                                     list[list[int]]]:
+    """One effect on the plant's spec and signals: (its Reality, its parameters, its
+    signature, the couplings it declares)."""
+    n = scale.n
+    reality, signature, couplings = Reality(n=n), None, []
+    params: Mapping[str, object]
+    if effect == "joint_friction":
+        params = physics.friction(spec, magnitude, rng, scale)
+    elif effect == "link_friction":
+        params = physics.friction(spec, magnitude, rng, scale)
+        viscous = np.array([params[f"Fv{j + 1}"] for j in range(n)])
+        reality = Reality(link_side_friction=True, link_side_viscous=viscous, n=n)
+    elif effect == "stribeck_friction":
+        reality, params, signature = signals.stribeck(spec, magnitude, rng, scale)
+    elif effect == "sigmoid_friction":
+        reality, params, signature = signals.sigmoid(magnitude, rng, scale)
+    elif effect == "torque_ripple":
+        reality, params, signature = signals.ripple(magnitude, rng, scale)
+    elif effect == "encoder_scale":
+        reality, params = signals.encoder_scale(magnitude, rng, scale)
+    elif effect == "coupled_pair":
+        reality, params, couplings = signals.coupled_pair(spec, magnitude, rng, scale)
+    elif effect == "payload":
+        params = physics.payload(spec, magnitude, rng, scale)
+    elif effect == "link_inertia":
+        params = physics.link_inertia(spec, magnitude, rng, scale)
+    elif effect == "armature":
+        params = physics.armature(spec, magnitude, rng, scale)
+    elif effect == "base_tilt":
+        params = physics.base_tilt(spec, magnitude, rng, scale)
+    else:
+        reality, params = signals.reality(effect, magnitude, rng, scale)
+    return reality, params, signature, couplings
+
+
+def _mix_draw(rng: np.random.Generator) -> tuple[str, ...]:
+    """One friction form and two others of :data:`MIX_POOL`, in EFFECTS order."""
+    friction = str(rng.choice(MIX_FRICTION))
+    others = [str(e) for e in rng.choice(MIX_POOL, size=2, replace=False)]
+    return tuple(sorted([friction, *others], key=EFFECTS.index))
+
+
+def _merged(a: Reality, b: Reality) -> Reality:
+    """``a`` with every field ``b`` sets (differs from an unset Reality's)."""
+    unset = Reality(n=a.n)
+    changed = {f.name: getattr(b, f.name) for f in fields(Reality)
+               if not _same(getattr(b, f.name), getattr(unset, f.name))}
+    return replace(a, **changed) if changed else a
+
+
+def _same(x: object, y: object) -> bool:
+    if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+        return x is not None and y is not None and np.array_equal(x, y)
+    return x == y
 
 
 def _recording(run: TwinRun, noise: SensorNoise, arm: ArmModel,
@@ -200,5 +251,5 @@ def _recording(run: TwinRun, noise: SensorNoise, arm: ArmModel,
     return Recording(meta, pa.table(cols))
 
 
-__all__ = ["DECLARED", "DURATION", "EFFECTS", "MAGNITUDE_RANGE", "OUT_OF_LIBRARY", "PARTLY_IN_LIBRARY",
-           "RATE", "WITHHELD", "_plant", "make_twin"]
+__all__ = ["DECLARED", "DURATION", "EFFECTS", "MAGNITUDE_RANGE", "MIX", "OUT_OF_LIBRARY",
+           "PARTLY_IN_LIBRARY", "RATE", "WITHHELD", "_plant", "make_twin"]

@@ -25,6 +25,9 @@ DOMAINS: dict[str, str] = {
 }
 DEFAULT_RANGE = (0.5, 2.0)
 ANY_ARM = "arm_dynamics"
+MIX = "mix"
+"""A drawn mix of effects: the arm-dynamics twin's (with ``--domain arm_dynamics``) or, as
+``serpar twin`` has it with no domain, the cell's."""
 """The one domain whose twin takes another arm (``robot``) and a ``duration``."""
 
 
@@ -46,6 +49,8 @@ def effects() -> dict[str, str]:
 def domain_of(effect: str | None, domain: str | None) -> str:
     if effect is None:
         return domain or "arm_static"
+    if effect == MIX and domain == ANY_ARM:  # the arm-dynamics twin's mix of its own effects
+        return ANY_ARM
     table = effects()
     if effect not in table:
         raise ConfigError(f"unknown effect {effect!r}; valid: none, {', '.join(table)}")
