@@ -297,6 +297,27 @@ class EffectModels:
         base = self.base_link if sensor else self.base_drive
         return self.dyn.link_torque(q, dq, ddq) - base[rows]
 
+    def stribeck_columns(self, p: Vec, rows: NDArray[np.int64]) -> tuple[Vec, Vec]:
+        """(drive, band), each 2n x rows x n: the Stribeck fall's derivatives by dFs and by
+        each joint's speed, exact for the log-speed interpolant :meth:`_stribeck` evaluates."""
+        n = self.n
+        excess, speeds = p[:n], p[n:]
+        x = np.log(np.clip(speeds, STRIBECK_SPEEDS[0], STRIBECK_SPEEDS[-1]))
+        grid = LOG_STRIBECK_SPEEDS
+        k = np.clip(np.searchsorted(grid, x) - 1, 0, len(grid) - 2)
+        j = np.arange(n)
+        r = rows[:, None]
+        lo, hi = self.stribeck[k, r, j], self.stribeck[k + 1, r, j]
+        w = (x - grid[k]) / (grid[k + 1] - grid[k])
+        inside = (speeds > STRIBECK_SPEEDS[0]) & (speeds < STRIBECK_SPEEDS[-1])  # clip: flat
+        per_speed = np.where(inside, 1.0 / np.where(inside, speeds, 1.0), 0.0)  # d log v / d v
+        slope = (hi - lo) / (grid[k + 1] - grid[k]) * per_speed
+        drive, band = np.zeros((2 * n, len(rows), n)), np.zeros((2 * n, len(rows), n))
+        drive[j, :, j] = ((1.0 - w) * lo + w * hi).T
+        drive[n + j, :, j] = (excess * slope).T
+        band[j, :, j] = (self.stuck[rows] * np.sign(excess)).T
+        return drive, band
+
     def _stribeck(self, speeds: Vec, rows: NDArray[np.int64]) -> Vec:
         """The Stribeck regressor at each joint's ``speeds``, interpolated in log speed on the
         grid (rows x n)."""

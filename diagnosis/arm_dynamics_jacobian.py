@@ -88,9 +88,9 @@ def tare_columns(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np
 LINEAR = ("joint_friction", "link_friction", "armature", "torque_sensor", INERTIAL)
 """Effects linear in their parameters that leave the rows' sigma alone (a coupled motor's
 block too): their residual columns are exact (:func:`linear_columns`), not differences."""
-EXACT = (*LINEAR, SIGMOID, TILT)
+EXACT = (*LINEAR, SIGMOID, TILT, "stribeck_friction")
 """Effects whose columns are exact: the linear ones, the sigmoid friction's and the base
-tilt's (analytic)."""
+tilt's (analytic), the Stribeck fall's (of its log-speed interpolant)."""
 
 
 def linear_columns(models: EffectModels, name: str, params: Mapping[str, Vec],
@@ -116,6 +116,8 @@ def linear_columns(models: EffectModels, name: str, params: Mapping[str, Vec],
         drive[j, :, j] = models.acceleration[rows].T
     elif name == SIGMOID:
         drive = models.sigmoid.columns(p, rows)
+    elif name == "stribeck_friction":
+        drive, band = models.stribeck_columns(p, rows)
     elif name == TILT:
         link, drive = models.tilt.columns(p, rows)
         if not t.has_link:

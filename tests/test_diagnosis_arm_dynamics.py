@@ -67,7 +67,7 @@ def test_the_jacobian_is_the_fits_own_differences_with_exact_tares() -> None:
     """The family's Jacobian (diagnosis/arm_dynamics_jacobian.py) against scipy's 2-point
     differences of its residual: the non-linear effects' columns equal, the tares', the
     linear effects' (exact: friction through its stiction band, rotor inertia) and the sigmoid
-    friction's (analytic) within the differences' own error; a wrong sign or a dropped
+    friction's and the Stribeck fall's (analytic) within the differences' own error; a wrong sign or a dropped
     stiction band would be ~100 % off."""
     from scipy.optimize._numdiff import approx_derivative
 
@@ -80,6 +80,7 @@ def test_the_jacobian_is_the_fits_own_differences_with_exact_tares() -> None:
               "sigmoid_friction": by_name["sigmoid_friction"].x0 + np.r_[np.full(7, 0.3),
                                                                         np.linspace(-3, 5, 7),
                                                                         np.linspace(-.03, .04, 7)],
+              "stribeck_friction": np.r_[np.linspace(0.1, 0.4, 7), np.linspace(0.021, 0.17, 7)],
               "payload": by_name["payload"].x0 + 0.01, "latency": np.array([0.002])}
     sizes = {k: v.size for k, v in params.items()}
 
@@ -92,7 +93,7 @@ def test_the_jacobian_is_the_fits_own_differences_with_exact_tares() -> None:
     want = approx_derivative(fun, np.concatenate(list(params.values())), method="2-point")
     got = fam.jacobian(params, train)
     n_exact = (sizes[fam.baseline.name] + sizes["joint_friction"] + sizes["armature"]
-               + sizes["sigmoid_friction"])
+               + sizes["sigmoid_friction"] + sizes["stribeck_friction"])
     np.testing.assert_array_equal(got[:, n_exact:], want[:, n_exact:])
     scale = np.abs(want[:, :n_exact]).max(axis=0)
     assert np.all(np.abs(got[:, :n_exact] - want[:, :n_exact]).max(axis=0) < 1e-6 * scale)
