@@ -109,6 +109,9 @@ class ArmDynamicsFamily:
     """The :class:`~serpar.diagnosis.family.Family` of one arm recording, for any arm."""
 
     kind = KIND
+    tells_rivals = True
+    """Whether "A or B" is tested (diagnosis/rivals.py): every row carries every channel of
+    the arm, and the rivals are non-nested forms of the arm's physics."""
 
     def __init__(self, terms: Terms, dynamics: ArmDynamics, cfg: ArmDynamicsConfig,
                  phases: tuple[tuple[str, float, float], ...] = (), tare_walk: float = 0.0,

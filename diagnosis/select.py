@@ -201,8 +201,12 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
                                                          n_channels),
                                      train, heldout, splits, n_channels, every)
     # an effect another candidate replaces as well is "A or B", not a finding; the model keeps
-    # it (a model must carry one of the two), and the verdict says which it carries
-    if kept.active:
+    # it (a model must carry one of the two), and the verdict says which it carries. Only in
+    # families that say the test holds there (``tells_rivals``): Vuong's test pools every row
+    # and counts no parameters, so a rival that nests the effect (a Stewart geometry's leg
+    # lengths hold the encoder offsets) or acts on other rows (an episode's arm against its
+    # chamfer slides) reads "alike"
+    if kept.active and getattr(family, "tells_rivals", False):
         if report:
             report("rivals")
         for name, rival in rivals(family, kept, path, scores, fixed, train, heldout,

@@ -219,6 +219,8 @@ class TwinLines(Line):
     """Line with a second candidate, ``creep``, whose shape is the slope's over these data
     (c (t + 0.001 sin(t)): a creep the data cannot tell from a drift)."""
 
+    tells_rivals = True
+
     def __init__(self, truth: dict[str, float], seed: int = 0) -> None:
         super().__init__(truth, seed)
         self.effects += (Effect("creep", "creep", ("c",), ("m/s",), np.zeros(1),
