@@ -29,7 +29,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "stepping, and a trial scene's build in place and in processes (adds ~2 min)")
     p.add_argument("--diagnose", action="store_true",
                    help="also time serpar diagnose on a 60-s arm-dynamics twin with a mix of "
-                        "concealed effects, full candidate library (adds ~2-4 min)")
+                        "concealed effects, full candidate library (its goal: <= 2 min on 2 cores; "
+                        "it runs longer today, docs/diagnosis.md)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_bench)
     return p
