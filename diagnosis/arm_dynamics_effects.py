@@ -13,9 +13,8 @@ evaluated with ``mj_rne`` and no hand-written dynamics:
 * the published sigmoid friction is evaluated from each window's full-rate velocity
   (arm_dynamics_sigmoid.py);
 * friction, rotor inertia, a coupled motor's terms and sensor gain are linear regressors on
-  the data and the nominal torque; the
-  Stribeck fall's regressor is tabulated on a grid of Stribeck speeds and interpolated in
-  log speed, so each joint's transition speed is fitted too;
+  the data and the nominal torque; the Stribeck fall's is tabulated on a grid of speeds and
+  interpolated in log speed (arm_dynamics_stribeck.py), so each joint's speed is fitted too;
 * a tilted base turns gravity (arm_dynamics_tilt.py: exact, MuJoCo's gravity torque per axis);
 * latency shifts the windowed command (a cubic spline) by the delay;
 * sensor timing shifts the link channel's model by the torque sensors' lag behind the
@@ -42,7 +41,6 @@ from serpar.diagnosis.arm_dynamics_inertial import LinkInertial
 from serpar.diagnosis.arm_dynamics_library import (
     EXTENT_START,
     STICK_VELOCITY,
-    STRIBECK_SPEEDS,
     Channels,
     Coupling,
     arm_effects,
@@ -56,6 +54,7 @@ from serpar.diagnosis.arm_dynamics_payload import (
 )
 from serpar.diagnosis.arm_dynamics_sigmoid import NAME as SIGMOID
 from serpar.diagnosis.arm_dynamics_sigmoid import SigmoidFriction
+from serpar.diagnosis.arm_dynamics_stribeck import StribeckFall
 from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.arm_dynamics_tilt import NAME as TILT
 from serpar.diagnosis.arm_dynamics_tilt import BaseTilt
@@ -66,7 +65,6 @@ Vec = NDArray[np.float64]
 
 __all__ = ["BASELINE", "EFFECTS", "EXTENT_START", "STICK_VELOCITY", "EffectModels"]
 
-LOG_STRIBECK_SPEEDS = np.log(STRIBECK_SPEEDS)
 MEMO_SIZE = 8
 """Encoder-error evaluations kept (each a few hundred mj_rne calls)."""
 
@@ -105,9 +103,7 @@ class EffectModels:
         self.coulomb_link = rows.link_at(np.sign(v) * moving)
         self.viscous_link = rows.link_at(v)
         self.stuck_link = rows.link_at((~moving).astype(float))
-        signed = np.sign(v) * moving
-        self.stribeck = np.stack([rows.at(signed * np.exp(-(v / vs) ** 2))
-                                  for vs in STRIBECK_SPEEDS])  # speeds x rows x n
+        self.stribeck = StribeckFall(rows, v, moving)
         self.sigmoid = SigmoidFriction(terms)
         self.tilt = BaseTilt(terms, dynamics)
         # rotor inertia: the windowed acceleration, as the nominal armature term enters
@@ -187,7 +183,7 @@ class EffectModels:
             drive += self.sigmoid.torque(params[SIGMOID], rows)
         if "stribeck_friction" in params:
             p = params["stribeck_friction"]
-            drive += self._stribeck(p[n:], rows) * p[:n]
+            drive += self.stribeck.regressor(p[n:], rows) * p[:n]
             band += self.stuck[rows] * np.abs(p[:n])
         if "armature" in params:
             drive += self.acceleration[rows] * params["armature"]
@@ -296,35 +292,3 @@ class EffectModels:
                 x[:, self._scale_cols] /= 1.0 + scale
         base = self.base_link if sensor else self.base_drive
         return self.dyn.link_torque(q, dq, ddq) - base[rows]
-
-    def stribeck_columns(self, p: Vec, rows: NDArray[np.int64]) -> tuple[Vec, Vec]:
-        """(drive, band), each 2n x rows x n: the Stribeck fall's derivatives by dFs and by
-        each joint's speed, exact for the log-speed interpolant :meth:`_stribeck` evaluates."""
-        n = self.n
-        excess, speeds = p[:n], p[n:]
-        x = np.log(np.clip(speeds, STRIBECK_SPEEDS[0], STRIBECK_SPEEDS[-1]))
-        grid = LOG_STRIBECK_SPEEDS
-        k = np.clip(np.searchsorted(grid, x) - 1, 0, len(grid) - 2)
-        j = np.arange(n)
-        r = rows[:, None]
-        lo, hi = self.stribeck[k, r, j], self.stribeck[k + 1, r, j]
-        w = (x - grid[k]) / (grid[k + 1] - grid[k])
-        inside = (speeds > STRIBECK_SPEEDS[0]) & (speeds < STRIBECK_SPEEDS[-1])  # clip: flat
-        per_speed = np.where(inside, 1.0 / np.where(inside, speeds, 1.0), 0.0)  # d log v / d v
-        slope = (hi - lo) / (grid[k + 1] - grid[k]) * per_speed
-        drive, band = np.zeros((2 * n, len(rows), n)), np.zeros((2 * n, len(rows), n))
-        drive[j, :, j] = ((1.0 - w) * lo + w * hi).T
-        drive[n + j, :, j] = (excess * slope).T
-        band[j, :, j] = (self.stuck[rows] * np.sign(excess)).T
-        return drive, band
-
-    def _stribeck(self, speeds: Vec, rows: NDArray[np.int64]) -> Vec:
-        """The Stribeck regressor at each joint's ``speeds``, interpolated in log speed on the
-        grid (rows x n)."""
-        x = np.log(np.clip(speeds, STRIBECK_SPEEDS[0], STRIBECK_SPEEDS[-1]))
-        grid = LOG_STRIBECK_SPEEDS
-        k = np.clip(np.searchsorted(grid, x) - 1, 0, len(grid) - 2)
-        w = (x - grid[k]) / (grid[k + 1] - grid[k])
-        j = np.arange(self.n)
-        r = rows[:, None]
-        return (1.0 - w) * self.stribeck[k, r, j] + w * self.stribeck[k + 1, r, j]

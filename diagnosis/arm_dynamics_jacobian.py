@@ -117,7 +117,7 @@ def linear_columns(models: EffectModels, name: str, params: Mapping[str, Vec],
     elif name == SIGMOID:
         drive = models.sigmoid.columns(p, rows)
     elif name == "stribeck_friction":
-        drive, band = models.stribeck_columns(p, rows)
+        drive, band = models.stribeck.columns(p, rows, models.stuck[rows])
     elif name == TILT:
         link, drive = models.tilt.columns(p, rows)
         if not t.has_link:
