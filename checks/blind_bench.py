@@ -20,8 +20,10 @@ right nor wrong: counted (``a_or_b``) and left out of its kind's share.
 
 from __future__ import annotations
 
+import multiprocessing
 import time
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
 import numpy as np
@@ -131,6 +133,15 @@ def plan(trials: int, seed: int, domains: tuple[str, ...], library_only: bool = 
     return out
 
 
+def _failed(index: int, domain: str, effect: str, magnitude: float, seed: int,
+            exc: BaseException) -> Trial:
+    """The record of a trial that raised: scored as a miss, its error kept."""
+    label = "none" if effect in ("none", WRONG) else effect
+    return Trial(index, seed, domain, label, magnitude, None, "", False, float("nan"),
+                 float("nan"), f"{type(exc).__name__}: {exc}",
+                 WRONG_SIGMA if effect == WRONG else 1.0)
+
+
 def run_trial(index: int, domain: str, effect: str, magnitude: float, seed: int,
               robot: str | None = None) -> Trial:
     """One trial; ``robot``: the arm's URDF/MJCF file (the arm-dynamics twin on that arm,
@@ -149,8 +160,7 @@ def run_trial(index: int, domain: str, effect: str, magnitude: float, seed: int,
         diag = diagnose(family, seed)
         wall = time.perf_counter() - t0
     except Exception as exc:  # noqa: BLE001 (one failing trial never kills the bench)
-        return Trial(index, seed, domain, label, magnitude, None, "", False, float("nan"),
-                     float("nan"), f"{type(exc).__name__}: {exc}", sigma_error)
+        return _failed(index, domain, effect, magnitude, seed, exc)
     established = tuple(f.effect for f in diag.established)
     check = diag.residual
     ratio = None if check is None else check.noise_ratio
@@ -264,12 +274,29 @@ def check_robot(domains: tuple[str, ...], robot: str | None) -> None:
 def blind_bench(trials: int, seed: int, domains: tuple[str, ...] = tuple(DOMAINS),
                 progress: Callable[[Trial], object] | None = None,
                 library_only: bool = False, kinds: tuple[str, ...] | None = None,
-                robot: str | None = None) -> list[Trial]:
-    """``robot``: every trial's arm, from its URDF/MJCF file (the arm-dynamics domain only)."""
+                robot: str | None = None, workers: int = 1) -> list[Trial]:
+    """``robot``: every trial's arm, from its URDF/MJCF file (the arm-dynamics domain only);
+    ``workers``: trials run at once, each in its own process (the trials are the same)."""
     check_robot(domains, robot)
-    out = []
-    for k, (d, e, mag, s) in enumerate(plan(trials, seed, domains, library_only, kinds)):
-        out.append(run_trial(k, d, e, mag, s, robot))
-        if progress is not None:
-            progress(out[-1])
-    return out
+    if workers < 1:
+        raise ConfigError(f"--workers {workers}: must be >= 1")
+    drawn = plan(trials, seed, domains, library_only, kinds)
+    out: list[Trial] = []
+    if workers == 1:
+        for k, (d, e, mag, s) in enumerate(drawn):
+            out.append(run_trial(k, d, e, mag, s, robot))
+            if progress is not None:
+                progress(out[-1])
+        return out
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = {pool.submit(run_trial, k, d, e, mag, s, robot): (k, d, e, mag, s)
+                   for k, (d, e, mag, s) in enumerate(drawn)}
+        for done in as_completed(futures):
+            try:
+                trial = done.result()
+            except Exception as exc:  # noqa: BLE001 (a worker lost: that trial, not the bench)
+                trial = _failed(*futures[done], exc)
+            out.append(trial)
+            if progress is not None:
+                progress(trial)
+    return sorted(out, key=lambda t: t.index)

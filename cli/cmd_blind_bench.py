@@ -27,6 +27,9 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="draw no effect outside the candidate library (the kinds effect, none "
                         "and wrong_sigma)")
     add_robot_option(p)
+    p.add_argument("--workers", type=int, default=1,
+                   help="trials run at once, each in its own process (default 1; the trials "
+                        "and their scores are the same for any number)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_blind_bench)
     return p
@@ -40,7 +43,8 @@ def cmd_blind_bench(args: argparse.Namespace) -> int:
     bar = progress(args.trials, "blind-bench", enabled=sys.stderr.isatty())
     trials = blind_bench(args.trials, args.seed, domains, progress=lambda _t: bar.update(1),
                          library_only=args.library_only,
-                         kinds=tuple(args.kind) if args.kind else None, robot=args.robot)
+                         kinds=tuple(args.kind) if args.kind else None, robot=args.robot,
+                         workers=args.workers)
     bar.close()
     summary = summarise(trials)
     if args.json:

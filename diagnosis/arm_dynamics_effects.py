@@ -59,14 +59,15 @@ from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.arm_dynamics_tilt import NAME as TILT
 from serpar.diagnosis.arm_dynamics_tilt import BaseTilt
 from serpar.diagnosis.family import Effect
+from serpar.diagnosis.memo import Memo
 from serpar.sim.rigid_arm import PANDA_ARM, ArmDynamics
 
 Vec = NDArray[np.float64]
 
-__all__ = ["BASELINE", "EFFECTS", "EXTENT_START", "STICK_VELOCITY", "EffectModels"]
+__all__ = ["ADDS_INERTIA", "BASELINE", "EFFECTS", "EXTENT_START", "STICK_VELOCITY", "EffectModels"]
 
-MEMO_SIZE = 8
-"""Encoder-error evaluations kept (each a few hundred mj_rne calls)."""
+ADDS_INERTIA = ("payload", "link_inertia")
+"""Effects that add to the arm's inertia (and so to each row's acceleration noise)."""
 
 BASELINE = tare(7)
 """Always fitted: a torque sensor's zero drifts between tares on every real arm (Panda:
@@ -129,7 +130,7 @@ class EffectModels:
         self.link_rate = link_rate(terms, full)
         self._offset_cols = np.array(offset_joints, np.int64) - 1
         self._scale_cols = np.array(scale_joints, np.int64) - 1
-        self._memo: dict[tuple[str, bytes, bytes], tuple[Vec, Vec]] = {}
+        self._memo: Memo[tuple[Vec, Vec]] = Memo()
 
     def _per_link(self) -> tuple[Vec, Vec]:
         """Torque of each link's own inertia, windowed per row like the channels: scaling a
@@ -232,19 +233,13 @@ class EffectModels:
         """(link, drive) torque change of an encoder offset or scale, exact (``mj_rne`` at the
         true states), for the channels the recording has; the last few are kept, since a
         difference Jacobian asks for them again with other effects' parameters moved."""
-        key = (name, values.tobytes(), rows.tobytes())
-        hit = self._memo.get(key)
-        if hit is not None:
-            return hit
         kind = {"offset": values} if name == "encoder_offset" else {"scale": values}
         zeros = np.zeros((len(rows), self.n))
         t = self.terms
-        out = (self._true_state_torque(rows, True, **kind) if t.has_link else zeros,
-               self._true_state_torque(rows, False, **kind) if t.has_command else zeros)
-        if len(self._memo) >= MEMO_SIZE:
-            self._memo.pop(next(iter(self._memo)))
-        self._memo[key] = out
-        return out
+        return self._memo(lambda: (
+            self._true_state_torque(rows, True, **kind) if t.has_link else zeros,
+            self._true_state_torque(rows, False, **kind) if t.has_command else zeros),
+            name, values, rows)
 
     def _coupled(self, params: Mapping[str, Vec]) -> list[tuple[str, Coupling]]:
         if len(self.couplings) == 1:

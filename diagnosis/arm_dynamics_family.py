@@ -4,20 +4,20 @@ with the candidate effects of arm_dynamics_effects.py.
 
 Rows are windows (arm_dynamics_signals.py): one row = 14 whitened residuals, the link-side
 torque sensor (channel ``tau_J<j>``) and the drive command (channel ``tau_J_d<j>``) of each
-joint. Training and held-out rows are alternate blocks of :data:`BLOCK_S` seconds; the
+joint. Training and held-out rows are alternate blocks of ``ArmDynamicsConfig.block_s`` seconds; the
 windows tile the time axis, so no held-out sample enters a training row.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from serpar.diagnosis.arm_dynamics_effects import STICK_VELOCITY, EffectModels
+from serpar.diagnosis.arm_dynamics_config import ArmDynamicsConfig, Span
+from serpar.diagnosis.arm_dynamics_effects import ADDS_INERTIA, EffectModels
 from serpar.diagnosis.arm_dynamics_empirical import arm_library
 from serpar.diagnosis.arm_dynamics_grouping import hold_grouped
 from serpar.diagnosis.arm_dynamics_inertial import LinkInertial
@@ -39,13 +39,13 @@ from serpar.diagnosis.arm_dynamics_setup import (
 )
 from serpar.diagnosis.arm_dynamics_signals import (
     DRIVE_PREFIX,
-    SmoothingConfig,
     read_arm_series,
 )
 from serpar.diagnosis.arm_dynamics_terms import Terms, compute_terms, row_sigma
 from serpar.diagnosis.empirical import BasisGroup
 from serpar.diagnosis.family import Effect, LocateRow
 from serpar.diagnosis.locate import locate_rows
+from serpar.diagnosis.memo import Memo
 from serpar.diagnosis.residual import consecutive_noise_ratio
 from serpar.diagnosis.stability import default_folds
 from serpar.diagnosis.units import UnitView, per_row
@@ -55,54 +55,14 @@ from serpar.sim.recording import Recording
 from serpar.sim.rigid_arm import PANDA_ARM, ArmDynamics, ArmModel
 
 Vec = NDArray[np.float64]
-Span = tuple[float, float]
 
 KIND = "arm_dynamics"
-BLOCK_S = 2.0
-"""Length of the alternating training / held-out time blocks [s]."""
 CHANNELS: tuple[str, ...] = ch.TAU_J + ch.TAU_J_D
 """The Panda's residual columns of one row with sensors and command, in order."""
 MAX_EFFECTS_DRIVE = 6
 """Effects a measured drive torque may need at once: friction, its Stribeck fall, rotor
 inertia, a coupled motor, link inertia, a gain (a real drive has them all; each must still
 earn its place and hold up under resampling)."""
-
-
-@dataclass(frozen=True)
-class ArmDynamicsConfig:
-    smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
-    block_s: float = BLOCK_S
-    tare_knot_s: float | None = None
-    """None: one constant tare per torque sensor. A spacing [s]: each sensor's tare is a
-    piecewise-linear function of time with knots this far apart (the baseline then has n values
-    per knot), for recordings long enough that the sensor zero's random walk shows."""
-    stick_velocity: float = STICK_VELOCITY
-    """[rad/s] Below this speed a joint with dry friction may be stuck (its friction anywhere in
-    +-Fc): the rows weigh it as an interval."""
-    train_span: Span | None = None
-    heldout_span: Span | None = None
-    """Seconds from the first sample: the rows (whole windows) inside ``train_span`` train and
-    those inside ``heldout_span`` are held out; the resampling folds stay inside the training
-    span. None (both): alternate ``block_s`` blocks of the whole recording."""
-
-    def __post_init__(self) -> None:
-        if not 0.0 < self.stick_velocity < 1.0:
-            raise IdentificationError(f"ArmDynamicsConfig.stick_velocity={self.stick_velocity} "
-                                      "rad/s must be in (0, 1)")
-        if not self.block_s > 0:
-            raise IdentificationError(f"ArmDynamicsConfig.block_s={self.block_s} must be > 0")
-        if self.tare_knot_s is not None and not self.tare_knot_s > 0:
-            raise IdentificationError(f"ArmDynamicsConfig.tare_knot_s={self.tare_knot_s} must be "
-                                      "> 0 or None")
-        if (self.train_span is None) != (self.heldout_span is None):
-            raise IdentificationError("give both the training and the held-out span, or neither")
-        if self.train_span is not None and self.heldout_span is not None:
-            (a, b), (c, d) = self.train_span, self.heldout_span
-            if not (0 <= a < b and 0 <= c < d):
-                raise IdentificationError(f"spans {a}:{b} and {c}:{d} s must be start < end, >= 0")
-            if a < d and c < b:
-                raise IdentificationError(f"the training span {a}:{b} s and the held-out span "
-                                          f"{c}:{d} s overlap; held-out rows must be unseen")
 
 
 class ArmDynamicsFamily:
@@ -134,6 +94,8 @@ class ArmDynamicsFamily:
         self._tare_var: Vec | None = None
         if cfg.tare_knot_s is not None:
             self.pin_tare_knots(np.arange(len(terms.time)))
+        self._misfit_memo: Memo[tuple[Vec, Vec, Vec, Vec, Vec, Vec]] = Memo()
+        self._sigma_memo: Memo[tuple[Vec, Vec]] = Memo()
         self._models = models or EffectModels(terms, dynamics, cfg.stick_velocity)
         self.effects: tuple[Effect, ...] = effects if effects is not None else arm_effects(
             n, Channels(terms.has_link, None), (), (), dynamics.armature)
@@ -176,8 +138,14 @@ class ArmDynamicsFamily:
     def misfits(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
                  ) -> tuple[Vec, Vec, Vec, Vec, Vec, Vec]:
         """Per row and joint: the link and drive misfits before the stiction band, the band of
-        each, and each channel's sigma [N m]."""
+        each, and each channel's sigma [N m] (kept for the last few asked: the residual, its
+        Jacobian and the tare's columns ask at the same point; read-only)."""
         rows = np.asarray(rows, np.int64)
+        key = [rows] + [x for name in sorted(params) for x in (name, params[name])]
+        return self._misfit_memo(lambda: self._misfits(params, rows), *key)
+
+    def _misfits(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
+                 ) -> tuple[Vec, Vec, Vec, Vec, Vec, Vec]:
         t = self.terms
         link_model, drive_model, link_band, band = self._models.contributions(params, rows)
         link = t.link[rows] - link_model
@@ -187,6 +155,15 @@ class ArmDynamicsFamily:
                 link = link - self._tare(params[self._base.name], rows)
             else:
                 drive = drive - self._tare(params[self._base.name], rows)
+        inertial = [x for name in ADDS_INERTIA if name in params for x in (name, params[name])]
+        sigma_link, sigma_drive = self._sigma_memo(lambda: self._sigmas(params, rows), rows,
+                                                   *inertial)
+        return link, drive, link_band, band, sigma_link, sigma_drive
+
+    def _sigmas(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> tuple[Vec, Vec]:
+        """Each row's link and drive sigma: a payload or link inertia the fit adds changes the
+        acceleration noise's share."""
+        t = self.terms
         added = self._models.added_inertia(params, rows)
         if added is None:
             sigma_link, sigma_drive = t.sigma_link[rows], t.sigma_drive[rows]
@@ -195,7 +172,7 @@ class ArmDynamicsFamily:
                                                 t.mass_link[rows] + added, t.mass_full[rows] + added)
         if self._tare_var is not None:
             sigma_link = np.sqrt(sigma_link**2 + self._tare_var[rows, None])
-        return link, drive, link_band, band, sigma_link, sigma_drive
+        return sigma_link, sigma_drive
 
     def noise_ratio(self, rows: NDArray[np.int64], whitened: Vec) -> tuple[float, str] | None:
         """The data's noise over the stated sigma, from sample-to-sample differences (white
@@ -269,6 +246,8 @@ class ArmDynamicsFamily:
         """Keep the drifting tare's knots that training rows pin (a row within one spacing):
         a knot only held-out rows could fix would be a free parameter fitted on nothing."""
         if self.cfg.tare_knot_s is not None:
+            # the knots move: misfits and sigmas kept are of the old ones
+            self._misfit_memo, self._sigma_memo = Memo(), Memo()
             self._knots, self.baseline = drifting_tare(self.terms.time, self.terms.time[train],
                                                        self.cfg.tare_knot_s, self._base)
             if self._tare_walk > 0:

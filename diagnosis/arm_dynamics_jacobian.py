@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from serpar.diagnosis.arm_dynamics_effects import INERTIAL, SIGMOID, TILT, EffectModels
 from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.family import Effect
+from serpar.diagnosis.memo import Memo
 
 Vec = NDArray[np.float64]
 FD_STEP = float(np.sqrt(np.finfo(float).eps))
@@ -71,18 +72,39 @@ def tare_columns(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np
         slope = (np.abs(drive) > band) / sigma_drive
     n = family.n
     first = family._blocks.index(family.tare_block) * n
-    weights = _tare_weights(family, rows)  # knots x rows
-    n_ch = len(family.channels)
+    knots = family._knots
+    pattern = _PATTERNS(lambda: _tare_pattern(_tare_weights(family, rows), n,
+                                              len(family.channels), first),
+                        family.terms.time[rows], np.zeros(0) if knots is None else knots,
+                        f"{n} {len(family.channels)} {first}")
+    weight, gather, indices, indptr, shape = pattern
+    b = sp.csr_matrix((weight * slope.ravel()[gather], indices, indptr), shape=shape)
+    b.eliminate_zeros()  # rows inside the band: no column (a profile with none stops)
+    return b
+
+
+_PATTERNS: Memo[tuple[Vec, NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
+                      tuple[int, int]]] = Memo()
+"""The tare columns' sparsity and weights per row set (the slope through the band changes
+with the parameters, the rest does not)."""
+
+
+def _tare_pattern(weights: Vec, n: int, n_ch: int, first: int
+                  ) -> tuple[Vec, NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
+                             tuple[int, int]]:
+    """CSR layout of the tare columns for knot weights (knots x rows): minus each entry's
+    weight, the index of its slope in ``slope.ravel()``, the column indices, the row pointer
+    and the shape."""
     knot, row = np.nonzero(weights)
-    r_idx, c_idx, vals = [], [], []
-    for j in range(n):
-        v = -weights[knot, row] * slope[row, j]
-        keep = v != 0
-        r_idx.append(row[keep] * n_ch + first + j)
-        c_idx.append(knot[keep] * n + j)
-        vals.append(v[keep])
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(r_idx), np.concatenate(c_idx))),
-                         shape=(len(rows) * n_ch, weights.shape[0] * n))
+    j = np.arange(n)
+    res_row = (row[:, None] * n_ch + first + j[None, :]).ravel()
+    col = (knot[:, None] * n + j[None, :]).ravel()
+    weight = -np.repeat(weights[knot, row], n)
+    gather = (row[:, None] * n + j[None, :]).ravel()
+    order = np.lexsort((col, res_row))
+    shape = (weights.shape[1] * n_ch, weights.shape[0] * n)
+    indptr = np.r_[0, np.cumsum(np.bincount(res_row, minlength=shape[0]))]
+    return weight[order], gather[order], col[order], indptr, shape
 
 
 LINEAR = ("joint_friction", "link_friction", "armature", "torque_sensor", INERTIAL)

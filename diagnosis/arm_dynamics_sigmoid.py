@@ -18,6 +18,7 @@ from scipy.special import expit
 
 from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.family import Effect
+from serpar.diagnosis.memo import Memo
 
 Vec = NDArray[np.float64]
 
@@ -59,16 +60,23 @@ class SigmoidFriction:
         self.kernel = rows.kernel
         self.weight = float(np.sum(rows.kernel))
         self.n = terms.n
+        self._memo: Memo[Vec] = Memo()
 
     def _split(self, p: Vec) -> tuple[Vec, Vec, Vec]:
         n = self.n
         return p[:n], p[n:2 * n], p[2 * n:]
 
     def torque(self, p: Vec, rows: NDArray[np.int64]) -> Vec:
-        """rows x n: the friction torque the drive loses, windowed like the drive channel."""
+        """rows x n: the friction torque the drive loses, windowed like the drive channel
+        (kept for the last few ``p``: read-only)."""
+        return self._memo(lambda: self._torque(p, rows), p, rows)
+
+    def _torque(self, p: Vec, rows: NDArray[np.int64]) -> Vec:
         phi1, phi2, phi3 = self._split(p)
         s = expit(phi2 * (self.velocity[rows] + phi3))
-        return phi1 * (np.einsum("rmj,m->rj", s, self.kernel) - self.weight * expit(phi2 * phi3))
+        out = phi1 * (np.einsum("rmj,m->rj", s, self.kernel) - self.weight * expit(phi2 * phi3))
+        out.flags.writeable = False
+        return out
 
     def columns(self, p: Vec, rows: NDArray[np.int64]) -> Vec:
         """3n x rows x n: d torque / d (phi1, phi2, phi3), each on its own joint's channel."""

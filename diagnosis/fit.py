@@ -8,12 +8,12 @@ noise floor must not claim the noise-limited precision.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 
 from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.separable import profile, projected
@@ -84,6 +84,31 @@ def unpack(blocks: tuple[Effect, ...], x: NDArray[np.float64]) -> dict[str, NDAr
     return out
 
 
+TOLERANCES = {"ftol": 1e-10, "xtol": 1e-10, "gtol": 1e-10}
+"""scipy's stopping rules, tight: a fit started on a bound with a large residual (a
+frictionless model against a real arm) takes a first step too small for any looser ``ftol``."""
+CRAWL_ITERATIONS = 10
+CRAWL_SHARE = 1e-7
+"""A fit whose last :data:`CRAWL_ITERATIONS` steps together lowered its chi^2 by less than this
+share of it is done. Every decision the diagnosis takes is on chi^2 differences of order one
+(k ln n per parameter, held-out drops); a misspecified fit (chi^2 in the millions) crawls along
+its valley for thousands of evaluations under the tolerances above and moves its chi^2 by a
+few units (a few 1e-6 of itself) doing so, while a fit near the noise stops on them first."""
+
+
+def _crawl_stop() -> Callable[[OptimizeResult], None]:
+    """A least_squares callback that ends the fit when it crawls (:data:`CRAWL_SHARE`)."""
+    costs: list[float] = []
+
+    def callback(intermediate_result: OptimizeResult) -> None:  # scipy passes it by this name
+        costs.append(float(intermediate_result.cost))
+        if (len(costs) > CRAWL_ITERATIONS
+                and costs[-1 - CRAWL_ITERATIONS] - costs[-1] < CRAWL_SHARE * costs[-1]):
+            raise StopIteration
+
+    return callback
+
+
 START_INSIDE = 0.01
 """In a family that sets ``start_inside`` (an arm's dynamics against its own file), a new
 effect's parameter whose x0 sits on a bound (no friction, no delay) starts this share of its
@@ -140,7 +165,7 @@ def fit_model(family: Family, active: tuple[str, ...], train: NDArray[np.int64],
            else (lambda xf: exact(unpack(blocks, full(xf)), train)[:, free]))
     n_free = int(free.sum())
     sol = least_squares(fun, x0[free], jac=jac, bounds=(lo[free], hi[free]), method="trf",
-                        x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10,
+                        x_scale="jac", callback=_crawl_stop(), **TOLERANCES,
                         max_nfev=200 * (n_free + 1))
     if not np.all(np.isfinite(sol.fun)):
         raise IdentificationError(f"the fit of {'+'.join(active) or 'the baseline'} produced "
@@ -185,7 +210,8 @@ def _fit_separable(family: Family, active: tuple[str, ...], blocks: tuple[Effect
     nfev = 1
     if outer.any():
         sol = least_squares(solve, x0[outer], jac=jac, bounds=(lo[outer], hi[outer]),
-                            method="trf", x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10,
+                            method="trf", x_scale="jac", callback=_crawl_stop(),
+                            **TOLERANCES,
                             max_nfev=200 * (int(outer.sum()) + 1))
         xo, nfev = sol.x, int(sol.nfev)
     else:

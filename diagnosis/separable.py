@@ -29,6 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
+from scipy.linalg import cho_factor, cho_solve
 
 Vec = NDArray[np.float64]
 Rows = NDArray[np.int64]
@@ -49,13 +50,28 @@ class SeparableFamily(Protocol):
     def baseline_columns(self, params: Mapping[str, Vec], rows: Rows) -> sp.csr_matrix: ...
 
 
-def _solver(b: sp.csr_matrix) -> spla.SuperLU:
-    """The factorised normal matrix of ``b``, with the ridge."""
-    normal = (b.T @ b).tocsc()
-    diag = normal.diagonal()
-    scale = float(diag.max()) if diag.size and diag.max() > 0 else 1.0
-    normal = normal + sp.identity(normal.shape[0], format="csc") * (RIDGE * scale)
-    return spla.splu(normal)
+DENSE_COLUMNS = 64
+"""A baseline with at most this many columns (one constant tare per sensor) is solved dense:
+sparse factorisation costs more than it saves on a handful of columns."""
+
+
+class _Normal:
+    """The factorised normal matrix of ``b``, with the ridge: ``solve(b.T @ y)``."""
+
+    def __init__(self, b: sp.csr_matrix) -> None:
+        self._dense = b.shape[1] <= DENSE_COLUMNS
+        normal = b.T @ b
+        normal = normal.toarray() if self._dense else normal.tocsc()
+        diag = normal.diagonal()
+        scale = float(diag.max()) if diag.size and diag.max() > 0 else 1.0
+        ridge = RIDGE * scale
+        if self._dense:
+            self._factor = cho_factor(normal + ridge * np.eye(normal.shape[0]))
+        else:
+            self._lu = spla.splu(normal + sp.identity(normal.shape[0], format="csc") * ridge)
+
+    def solve(self, rhs: Vec) -> Vec:
+        return cho_solve(self._factor, rhs) if self._dense else self._lu.solve(rhs)
 
 
 def profile(family: SeparableFamily, params: Mapping[str, Vec], name: str, lower: Vec,
@@ -70,7 +86,7 @@ def profile(family: SeparableFamily, params: Mapping[str, Vec], name: str, lower
         b = family.baseline_columns(current, rows)
         if b.nnz == 0:
             break
-        step = -_solver(b).solve(np.asarray(b.T @ r).ravel())
+        step = -_Normal(b).solve(np.asarray(b.T @ r).ravel())
         for _halving in range(30):
             trial_t = np.clip(t + step, lower, upper)
             trial = {**params, name: trial_t}
@@ -94,5 +110,5 @@ def projected(jac: Vec, n_base: int, b: sp.csr_matrix) -> Vec:
     rest = jac[:, n_base:]
     if b.nnz == 0 or rest.shape[1] == 0:
         return rest
-    coef = _solver(b).solve(np.asarray(b.T @ rest))
+    coef = _Normal(b).solve(np.asarray(b.T @ rest))
     return rest - b @ coef

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from serpar.checks.blind_bench import KINDS, WITHHELD, WRONG, plan, run_trial
+from serpar.checks.blind_bench import KINDS, WITHHELD, WRONG, blind_bench, plan, run_trial
 from serpar.errors import ConfigError
 from serpar.twins import arm_dynamics_twin, stewart_twin
 
@@ -74,3 +74,15 @@ def test_an_a_or_b_trial_is_neither_right_nor_wrong() -> None:
     f = Finding(1, "link_inertia", "", (), 0.5, -10.0, 10.0, established=False, reasons=(reason,))
     assert _a_or_b_holds((f,), "payload") and _a_or_b_holds((f,), "link_inertia")
     assert not _a_or_b_holds((f,), "armature")
+
+
+def test_workers_run_the_same_trials_and_keep_their_order() -> None:
+    """Two trials in two worker processes score as they do one after the other (the trials are
+    drawn before any runs; only the wall times differ), and no worker is no bench."""
+    one = blind_bench(2, 5, ("arm_static",), library_only=True)
+    two = blind_bench(2, 5, ("arm_static",), library_only=True, workers=2)
+    strip = [{k: v for k, v in t.as_dict().items() if k != "diagnosis_s"} for t in one]
+    assert [t.index for t in two] == [0, 1]
+    assert [{k: v for k, v in t.as_dict().items() if k != "diagnosis_s"} for t in two] == strip
+    with pytest.raises(ConfigError, match="--workers 0: must be >= 1"):
+        blind_bench(2, 5, ("arm_static",), workers=0)

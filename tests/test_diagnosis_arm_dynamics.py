@@ -14,6 +14,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
+from serpar.diagnosis import separable as separable_fit
 from serpar.diagnosis.arm_dynamics_effects import EXTENT_START, EffectModels
 from serpar.diagnosis.arm_dynamics_family import (
     CHANNELS,
@@ -108,11 +109,15 @@ class _JointFit:
         self.baseline, self.residual, self.jacobian = inner.baseline, inner.residual, inner.jacobian
 
 
-def test_the_separable_fit_lands_where_the_joint_fit_does() -> None:
+@pytest.mark.parametrize("dense_columns", [0, separable_fit.DENSE_COLUMNS])
+def test_the_separable_fit_lands_where_the_joint_fit_does(dense_columns: int,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
     """Variable projection (diagnosis/separable.py: tares solved out at every evaluation) against
     the joint fit of tares and effects, on a drifting tare of 2-s knots: the same chi-square to
     1e-8, the payload's parameters within 1 % of their sigma, the same sigma to 0.1 %. A projection
-    that forgot the tare's columns would give the payload another mass and a smaller sigma."""
+    that forgot the tare's columns would give the payload another mass and a smaller sigma. Both
+    ways of solving the tare's normal equations: sparse (every baseline) and dense (a small one)."""
+    monkeypatch.setattr(separable_fit, "DENSE_COLUMNS", dense_columns)
     rec, _, _, _, _, _ = twin("payload")
     fam = family_from_recording(rec, ArmDynamicsConfig(tare_knot_s=2.0))
     train, held = fam.split(np.random.default_rng(SEED))
