@@ -158,7 +158,10 @@ class ArmDynamicsFamily:
         inertial = [x for name in ADDS_INERTIA if name in params for x in (name, params[name])]
         sigma_link, sigma_drive = self._sigma_memo(lambda: self._sigmas(params, rows), rows,
                                                    *inertial)
-        return link, drive, link_band, band, sigma_link, sigma_drive
+        out = (link, drive, link_band, band, sigma_link, sigma_drive)
+        for x in out:  # kept by the memos and handed out again: nobody may change them
+            x.flags.writeable = False
+        return out
 
     def _sigmas(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> tuple[Vec, Vec]:
         """Each row's link and drive sigma: a payload or link inertia the fit adds changes the
