@@ -85,6 +85,9 @@ class ArmDynamicsFamily:
         self.channels: tuple[str, ...] = tuple(c for b in blocks for c in b)
         self._blocks = (("link",) if terms.has_link else ()) + (
             ("drive",) if terms.has_command else ())
+        # one joint's torque through the sensor and through the drive (diagnosis/channel_check.py)
+        self.sibling_channels: tuple[int, ...] | None = (
+            tuple(range(n, 2 * n)) + tuple(range(n)) if len(self._blocks) == 2 else None)
         # the tares sit on the measured torque: the link-side sensors, else the drive torque
         self.tare_block = "link" if terms.has_link else "drive"
         self._base = tare(n, "tare" if terms.has_link else "drive_tare")

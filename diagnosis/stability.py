@@ -14,13 +14,8 @@ An effect the forward selection kept is *established* only when
   (contribution to the residual) as on the main fit;
 - it removes a material share of what the effects ranked before it left;
 - where the residual has parallel channels (a family's ``channels``, e.g. the torque of each
-  joint), what it changes in each channel is what that channel's held-out residual shows: in
-  at least ``MIN_CHANNEL_SHARE`` of the channels it changes materially (by
-  ``MATERIAL_CORRECTION`` sigma RMS or more), the channel's own best scale of the change
-  (least squares of the residual without it on its change) lies within ``MATCH_RANGE``: 1 up to
-  noise for an effect the data hold. A latency that stands in for friction near standstill
-  moves every joint's command by a few sigma; some joints want a third of that delay, others
-  twice or three times it.
+  joint), what it changes in each channel is what that channel's held-out residual shows, and
+  a channel it cannot change does not show the same (diagnosis/channel_check.py).
 
 Uncertainties: the larger of the local (Jacobian) one and the folds' jackknife (Resampled).
 Everything else the selection kept is "suspected, not established", with the reasons.
@@ -34,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from serpar.diagnosis.channel_check import ChannelCheck, channel_check
 from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.fit import Fit, blocks_of, earns, fit_model
 
@@ -48,10 +44,6 @@ effects ranked before it left."""
 MIN_AGREEMENT = 0.8
 """Cosine between an effect's contribution on a fold and on the main fit, on every fold where
 it is needed."""
-MIN_CHANNEL_SHARE = 0.8
-MATCH_RANGE = (0.75, 2.0)
-MATERIAL_CORRECTION = 1.0
-"""[sigma, RMS over the held-out rows] A channel the effect changes by less is not judged."""
 SIGNIFICANT = 3.0
 """An amplitude within this many sigma of zero does not identify the shapes it scales."""
 UNIDENTIFIED = 0.25
@@ -184,40 +176,6 @@ def _contribution(family: Family, params: Mapping[str, NDArray[np.float64]], nam
     return family.residual(params, rows) - family.residual(without, rows)
 
 
-@dataclass(frozen=True)
-class ChannelCheck:
-    """Per residual channel on the held-out rows: where the effect acts materially, and in which
-    of those the residual shows what it changes."""
-
-    material: tuple[str, ...]
-    matching: tuple[str, ...]
-
-    @property
-    def share(self) -> float:
-        return len(self.matching) / len(self.material) if self.material else 1.0
-
-
-def channel_check(family: Family, params: Mapping[str, NDArray[np.float64]], name: str,
-                  heldout: Rows) -> ChannelCheck | None:
-    """None when the family's residual has no parallel channels."""
-    channels = getattr(family, "channels", None)
-    if not channels:
-        return None
-    n = len(channels)
-    with_it = family.residual(params, heldout)
-    without = family.residual({k: v for k, v in params.items() if k != name}, heldout)
-    if with_it.size != n * len(heldout):
-        return None
-    a, b = with_it.reshape(-1, n), without.reshape(-1, n)
-    change = b - a  # what the effect removes from each channel's residual
-    power = np.mean(change**2, axis=0)
-    scale = np.mean(b * change, axis=0) / np.maximum(power, 1e-300)  # the channel's own fit
-    material = np.flatnonzero(power >= MATERIAL_CORRECTION**2)
-    lo, hi = MATCH_RANGE
-    return ChannelCheck(tuple(channels[i] for i in material),
-                        tuple(channels[i] for i in material if lo <= scale[i] <= hi))
-
-
 def _cosine(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
     na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
     return float(a @ b / (na * nb)) if na > 0 and nb > 0 else 0.0
@@ -243,12 +201,8 @@ def reasons_not_established(effect: Effect, values: NDArray[np.float64],
                        f"(< {MIN_FREQUENCY:.0%})")
         elif not resampled.consistent:
             why.append("it predicts different corrections on different resampled folds")
-    if channels is not None and channels.share < MIN_CHANNEL_SHARE:
-        off = [c for c in channels.material if c not in channels.matching]
-        why.append(f"of the {len(channels.material)} channels it changes, the residual shows "
-                   f"that change in {len(channels.matching)} only (not in {', '.join(off[:4])}"
-                   f"{' ...' if len(off) > 4 else ''}, whose residual holds under {MATCH_RANGE[0]:g}x "
-                   f"or over {MATCH_RANGE[1]:g}x of it): it stands in for something else")
+    if channels is not None:
+        why += channels.reasons()
     if share_of_remaining < MIN_SHARE_OF_REMAINING:
         why.append(f"explains only {100 * share_of_remaining:.2g} % of what the effects "
                    "before it left")
