@@ -31,8 +31,8 @@ STRIBECK_SPEEDS = (0.02, 0.05, 0.1, 0.2)
 """[rad/s] Stribeck velocities tried (published Panda fits: 0.01-0.1 rad/s)."""
 REVERSAL_SPEED = 0.01
 """[rad/s] Width of the sharp step at reversal (the diagnosis' stick velocity)."""
-TRANSITION_SPEEDS = (0.03, 0.1, 0.3)
-"""[rad/s] Widths of the smooth steps (Gaz et al.'s Panda: 1 / phi2 = 0.06-0.2 rad/s)."""
+TRANSITION_SPEEDS = (0.03, 0.1, 0.2, 0.4)
+"""[rad/s] Widths of the smooth steps (Gaz et al.'s Panda sigmoid, as a tanh: 2 / phi2 = 0.12-0.4 rad/s)."""
 DRIFT_TAUS = (1 / 6, 1 / 3)
 """Time constants of the saturating drifts, as shares of the recording's length."""
 
@@ -69,10 +69,14 @@ def arm_library(t: Terms, channels: tuple[str, ...], blocks: tuple[str, ...]) ->
                                   f"sin, cos(2 pi {qj} / {360 / k:.4g} deg)", column,
                                   window(np.column_stack([np.sin(phase), np.cos(phase)])), s,
                                   {"period_deg": 360.0 / k}))
-            for vt in (REVERSAL_SPEED, *TRANSITION_SPEEDS):
-                out.append(_group(name, vj, "reversal step", f"tanh({vj} / {vt} rad/s)",
-                                  column, window(np.tanh(v[:, j] / vt)[:, None]), s,
-                                  {"speed": vt}))
+            out.append(_group(name, vj, "reversal step", f"tanh({vj} / {REVERSAL_SPEED} rad/s)",
+                              column, window(np.tanh(v[:, j] / REVERSAL_SPEED)[:, None]), s,
+                              {"speed": REVERSAL_SPEED}))
+            for vt in TRANSITION_SPEEDS:
+                step = np.tanh(v[:, j] / vt)
+                out.append(_group(name, vj, "smooth step",
+                                  f"tanh({vj} / {vt} rad/s), tanh^2({vj} / {vt} rad/s)", column,
+                                  window(np.column_stack([step, step**2])), s, {"speed": vt}))
             for vs in STRIBECK_SPEEDS:
                 bump = np.sign(v[:, j]) * np.exp(-((v[:, j] / vs) ** 2))
                 out.append(_group(name, vj, "stribeck", f"sign({vj}) exp(-({vj} / {vs} rad/s)^2)",

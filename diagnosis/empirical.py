@@ -81,6 +81,9 @@ SHAPES: dict[str, str] = {
                 "like transmission ripple (gear meshing, motor cogging)",
     "reversal step": "a step of {step} at each reversal of {variable}: dry friction acting in "
                      "this channel",
+    "smooth step": "a smooth step of {step} through each reversal of {variable} (over ~{speed:.2g} "
+                   "/s), {level} higher one way than the other: friction that passes through "
+                   "zero at rest smoothly, about an offset (a sigmoid)",
     "stribeck": "a force opposing motion that falls from {amplitude} at standstill as {variable} "
                 "grows (~{speed:.2g} /s): friction that is higher near standstill (Stribeck)",
     "proportional": "off by {coefficient} x {variable} ({amplitude} RMS): a scale error "
@@ -108,6 +111,7 @@ class Term:
         amp = f"{self.size * np.sqrt(2.0) if g.shape == 'periodic' else self.size:.2g} {g.unit}"
         text = SHAPES[g.shape].format(
             variable=g.variable, amplitude=amp, coefficient=f"{self.coefficients[0]:.3g}", step=f"{2 * abs(self.coefficients[0]):.2g} {g.unit}",
+            level=f"{2 * abs(self.coefficients[-1]):.2g} {g.unit}",
             period_deg=g.detail.get("period_deg", 0.0), speed=g.detail.get("speed", 0.0),
             profile=g.label)
         return f"{g.channel} {text}; not in the library"

@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pyarrow as pa
 import pytest
+from scipy.special import expit
 
 from serpar.diagnosis import Effect
 from serpar.diagnosis.arm_dynamics_family import family_from_recording
@@ -150,6 +151,28 @@ def test_arm_ripple_in_the_drive_channel_is_found_on_its_joint_and_period() -> N
     assert abs(g.detail["period_deg"] - 23.0) < 0.02 * 23.0
     assert abs(emp.terms[0].size * np.sqrt(2) - 0.3) < 0.03
     assert emp.heldout_rms_after < 1.5 and emp.heldout_rms_before > 5
+
+
+def test_a_sigmoid_friction_withheld_is_characterised_on_its_joint_velocity() -> None:
+    """The published friction form on joint 4's drive only (phi1 0.6 N m, phi2 8 s/rad, phi3
+    0.03 rad/s: a smooth step about an offset) added to an effect-free twin's command, its
+    candidate withheld: joint friction (its Coulomb level) at most is established, and the
+    empirical term's first group is a smooth step in dq4 on tau_J_d4 (not a long-period shape
+    in q4, which a sweep of about a radian lets mimic it) that removes most of what is left."""
+    rec, _ = make_twin(None, None, 0)
+    dq4 = rec.column("dq4")
+    cmd = rec.column("tau_J_d4") + 0.6 * (expit(8.0 * (dq4 + 0.03)) - expit(8.0 * 0.03))
+    signals = rec.signals.set_column(rec.signals.schema.get_field_index("tau_J_d4"), "tau_J_d4",
+                                     pa.array(cmd))
+    family = family_from_recording(replace(rec, signals=signals))
+    family.effects = tuple(e for e in family.effects if e.name != "sigmoid_friction")
+    d = diagnose(family, seed=0)
+    assert {f.effect for f in d.established} <= {"joint_friction"}, d.verdict
+    emp = d.empirical
+    assert emp is not None and emp.terms, d.verdict
+    g = emp.terms[0].group
+    assert (g.channel, g.variable, g.shape) == ("tau_J_d4", "dq4", "smooth step"), d.verdict
+    assert emp.heldout_rms_after < 0.5 * emp.heldout_rms_before
 
 
 @pytest.mark.slow

@@ -150,6 +150,8 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int,
                    int(sim_seed.integers(2**31)), arm=arm)
     if effect == "encoder_scale":
         signature = signals.scale_signature(reality, run, RATE, scale)
+    elif effect == "sigmoid_friction":
+        signature = signals.sigmoid_signature(reality, run, RATE)
     answer: dict[str, object] = {"effect": effect, "magnitude": magnitude, "params": params,
                                  **({"effects": parts} if effect == MIX else {}),
                                  "torque_offset": [float(b) for b in run.torque_offset],
@@ -178,7 +180,7 @@ def _apply(effect: str, spec: mujoco.MjSpec, magnitude: float | None, rng: np.ra
     elif effect == "stribeck_friction":
         reality, params, signature = signals.stribeck(spec, magnitude, rng, scale)
     elif effect == "sigmoid_friction":
-        reality, params, signature = signals.sigmoid(magnitude, rng, scale)
+        reality, params = signals.sigmoid(magnitude, rng, scale)
     elif effect == "torque_ripple":
         reality, params, signature = signals.ripple(magnitude, rng, scale)
     elif effect == "encoder_scale":

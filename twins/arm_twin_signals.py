@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+from scipy.special import expit
 
 from serpar.sim.arm import GAZ_FRICTION_PHI
 from serpar.sim.physics import PhysicsConfig
@@ -85,7 +86,7 @@ def stribeck(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator, scale: A
 
 
 def sigmoid(mag: float, rng: np.random.Generator, scale: ArmScale
-            ) -> tuple[Reality, dict[str, object], dict[str, object]]:
+            ) -> tuple[Reality, dict[str, object]]:
     """Drive friction in the published Panda form (Gaz et al. 2019): per joint phi1 = twice the
     Coulomb level of reference times the magnitude (+-30 %), phi2 = the Panda's steepness along
     the chain (+-30 %), phi3 within +-SIGMOID_SHIFT. It replaces Coulomb + viscous friction:
@@ -100,15 +101,32 @@ def sigmoid(mag: float, rng: np.random.Generator, scale: ArmScale
     params: dict[str, object] = {}
     for k, phi in enumerate((phi1, phi2, phi3)):
         params.update({f"phi{k + 1}_{j + 1}": float(phi[j]) for j in range(n)})
-    order = np.argsort(-phi1)
-    j = int(order[0]) + 1
+    return Reality(sigmoid_phi=np.stack([phi1, phi2, phi3]), n=n), params
+
+
+def sigmoid_signature(reality: Reality, run: TwinRun, rate: float) -> dict[str, object]:
+    """Where the sigmoid shows beside a Coulomb + viscous friction (the joint friction the
+    library has): per joint, its torque over the true motion less the least-squares fit of
+    sign(dq) and dq; the channels and velocities within half of the largest such leftover
+    (every drive has the sigmoid; a joint whose motion stays mostly above its transition speed
+    shows little beyond a Coulomb level)."""
+    phi1, phi2, phi3 = np.asarray(reality.sigmoid_phi, float)
+    dq = np.gradient(run.q_true, axis=0) * rate
+    loss = phi1 * (expit(phi2 * (dq + phi3)) - expit(phi2 * phi3))
+    left = np.zeros(len(phi1))
+    for j in range(len(phi1)):
+        basis = np.column_stack([np.sign(dq[:, j]), dq[:, j]])
+        coef = np.linalg.lstsq(basis, loss[:, j], rcond=None)[0]
+        left[j] = float(np.sqrt(np.mean((loss[:, j] - basis @ coef) ** 2)))
+    seen = [int(i) + 1 for i in np.argsort(-left) if left[i] >= 0.5 * left.max()]
+    j = seen[0]
     words = (f"every drive loses a smooth friction, a level phi1 / 2 at speed about an offset, "
-             f"through zero at rest over ~1 / phi2 rad/s; joint {j} most ({phi1[j - 1]:.2f} N m "
-             f"swing, {1 / phi2[j - 1]:.3f} rad/s): in the command (tau_J_d), not in the "
+             f"through zero at rest over ~1 / phi2 rad/s: beyond a Coulomb + viscous friction "
+             f"it leaves most on joint {j} ({left[j - 1]:.3f} N m RMS; phi1 {phi1[j - 1]:.2f} N m, "
+             f"1 / phi2 {1 / phi2[j - 1]:.3f} rad/s), in the command (tau_J_d), not in the "
              "link-side sensor")
-    signature: dict[str, object] = {"channels": [f"tau_J_d{i + 1}" for i in order],
-                                    "variables": [f"dq{j}"], "words": words}
-    return Reality(sigmoid_phi=np.stack([phi1, phi2, phi3]), n=n), params, signature
+    return {"channels": [f"tau_J_d{i}" for i in seen], "variables": [f"dq{i}" for i in seen],
+            "beyond_coulomb_viscous_rms": [float(v) for v in left], "words": words}
 
 
 def ripple(mag: float, rng: np.random.Generator, scale: ArmScale
