@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from serpar.checks.blind_bench import KINDS, RMS_TARGET, blind_bench, check_robot, summarise
+from serpar.checks.blind_bench import KINDS, RMS_TARGET, blind_bench, check_robot
+from serpar.checks.blind_bench_summary import summarise
 from serpar.cli import arg_types
 from serpar.cli.output import print_json, progress, table
 from serpar.cli.robot_option import add_robot_option

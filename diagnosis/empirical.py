@@ -17,12 +17,12 @@ its words say what it looks like and why that is a hypothesis.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
+from serpar.diagnosis.empirical_term import SHAPES, BasisGroup, EmpiricalTerm, Term
 from serpar.diagnosis.stability import MIN_FREQUENCY
 
 Vec = NDArray[np.float64]
@@ -39,113 +39,6 @@ MIN_OWN_SHARE = 0.05
 """A group's own contribution on the held-out rows must reach this share of the excess
 held-out chi-square before it: with a many-parameter model refitted alongside, a group of
 negligible size can otherwise "earn" by letting the model's parameters move."""
-
-
-@dataclass(frozen=True)
-class BasisGroup:
-    """Basis columns that enter or leave the empirical term together."""
-
-    channel: str
-    """The residual channel it acts on, e.g. ``"tau_J_d4"``, ``"leg 3"``."""
-    variable: str
-    """What it follows, e.g. ``"q4"``, ``"dq2"``, ``"time"``, ``"stroke 3"``."""
-    shape: str
-    """One of :data:`SHAPES`' keys."""
-    label: str
-    """The basis in symbols, e.g. ``"sin, cos(2 pi q4 / 25.7 deg)"``."""
-    unit: str
-    """Unit of a coefficient."""
-    columns: Callable[[Rows], Vec]
-    """Whitened: (rows, k) values at the given rows for a channel-local group (``column``
-    set), or (rows x channels, k) over the whole whitened residual (``column`` None)."""
-    physical: Callable[[Rows], Vec]
-    """(rows, k) the basis in the channel's physical unit at the given rows: the term is
-    ``physical(rows) @ coefficients`` there (what a model file carries)."""
-    column: int | None = None
-    """Index of the residual channel (within a row) a channel-local group acts on."""
-    detail: Mapping[str, float] = field(default_factory=dict)
-    """Numbers its words use (a period [deg], a time constant [s], ...)."""
-
-    @property
-    def width(self) -> int:
-        """Number of its columns (coefficients)."""
-        return int(np.asarray(self.physical(np.zeros(1, np.int64))).shape[1])
-
-    @property
-    def key(self) -> tuple[str, str, str]:
-        return self.channel, self.variable, self.shape
-
-
-SHAPES: dict[str, str] = {
-    "periodic": "periodic in {variable}, period {period_deg:.3g} deg, amplitude {amplitude}: looks "
-                "like transmission ripple (gear meshing, motor cogging)",
-    "reversal step": "a step of {step} at each reversal of {variable}: dry friction acting in "
-                     "this channel",
-    "smooth step": "a smooth step of {step} through each reversal of {variable} (over ~{speed:.2g} "
-                   "/s), {level} higher one way than the other: friction that passes through "
-                   "zero at rest smoothly, about an offset (a sigmoid)",
-    "stribeck": "a force opposing motion that falls from {amplitude} at standstill as {variable} "
-                "grows (~{speed:.2g} /s): friction that is higher near standstill (Stribeck)",
-    "proportional": "off by {coefficient} x {variable} ({amplitude} RMS): a scale error "
-                    "(encoder, screw lead or gear ratio)",
-    "drift": "a drift with time, {amplitude} over the recording ({profile}): thermal growth or "
-             "a sensor drift",
-}
-
-
-@dataclass(frozen=True)
-class Term:
-    group: BasisGroup
-    coefficients: Vec
-    """Physical units, one per column."""
-    heldout_drop: float
-    """Held-out chi-square removed when it entered."""
-    frequency: float
-    """Share of the resampled folds on which the same (channel, variable, shape) was selected."""
-    size: float
-    """Its size over all rows [unit of the channel]: the range a drift covers, else the RMS
-    of its contribution."""
-
-    def words(self) -> str:
-        g = self.group
-        amp = f"{self.size * np.sqrt(2.0) if g.shape == 'periodic' else self.size:.2g} {g.unit}"
-        text = SHAPES[g.shape].format(
-            variable=g.variable, amplitude=amp, coefficient=f"{self.coefficients[0]:.3g}", step=f"{2 * abs(self.coefficients[0]):.2g} {g.unit}",
-            level=f"{2 * abs(self.coefficients[-1]):.2g} {g.unit}",
-            period_deg=g.detail.get("period_deg", 0.0), speed=g.detail.get("speed", 0.0),
-            profile=g.label)
-        return f"{g.channel} {text}; not in the library"
-
-    def as_dict(self) -> dict[str, object]:
-        g = self.group
-        return {"channel": g.channel, "variable": g.variable, "shape": g.shape, "basis": g.label,
-                "unit": g.unit, "coefficients": [float(c) for c in self.coefficients],
-                "detail": {k: float(v) for k, v in g.detail.items()},
-                "heldout_chi2_drop": self.heldout_drop, "resampled_frequency": self.frequency,
-                "size": self.size, "hypothesis": self.words()}
-
-
-@dataclass(frozen=True)
-class EmpiricalTerm:
-    terms: tuple[Term, ...]
-    heldout_rms_before: float
-    heldout_rms_after: float
-    """Held-out whitened RMS with the kept terms added (1 = the stated noise)."""
-    rejected: tuple[str, ...] = ()
-    """Groups the main split selected but the folds did not, with their frequency."""
-
-    def words(self) -> str:
-        if not self.terms:
-            return "no empirical term holds up on held-out data and resampled folds"
-        return ("; ".join(t.words() for t in self.terms)
-                + f" (held-out {self.heldout_rms_before:.3g} -> {self.heldout_rms_after:.3g} "
-                  "x the stated noise with this empirical term)")
-
-    def as_dict(self) -> dict[str, object]:
-        return {"terms": [t.as_dict() for t in self.terms],
-                "heldout_rms_whitened_before": self.heldout_rms_before,
-                "heldout_rms_whitened_after": self.heldout_rms_after,
-                "rejected": list(self.rejected), "words": self.words()}
 
 
 def design(groups: list[BasisGroup], chosen: list[int], rows: Rows, n_channels: int,
@@ -317,3 +210,7 @@ def _size(group: BasisGroup, coef: Vec, every: Rows) -> float:
     in the channel's physical unit."""
     x = np.asarray(group.physical(every), float) @ coef
     return float(np.ptp(x)) if group.shape == "drift" else float(np.sqrt(np.mean(x**2)))
+
+
+__all__ = ["SHAPES", "BasisGroup", "EmpiricalTerm", "Refit", "Term", "characterise", "design",
+           "fixed_refit", "select_terms"]

@@ -60,7 +60,8 @@ def test_stribeck_friction_is_right_after_its_coulomb_part() -> None:
 def test_an_a_or_b_trial_is_neither_right_nor_wrong() -> None:
     """A hidden effect reported as one side of "A or B: these data cannot tell" is counted
     apart and left out of its kind's share; a wrong name still counts against it."""
-    from serpar.checks.blind_bench import Trial, _a_or_b_holds, summarise
+    from serpar.checks.blind_bench import Trial, _a_or_b_holds
+    from serpar.checks.blind_bench_summary import summarise
     from serpar.diagnosis.result import Finding
 
     def trial(correct: bool, undecided: bool = False) -> Trial:
