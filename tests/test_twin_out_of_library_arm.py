@@ -115,8 +115,6 @@ def test_stribeck_friction_is_higher_just_off_a_reversal_than_sliding() -> None:
     p = answer["params"]
     excess = np.array([p[f"Fs{i}"] - p[f"Fc{i}"] for i in range(1, 8)])
     j = int(np.argmax(excess))
-    assert answer["signature"]["variables"] == [f"dq{j + 1}"]
-    assert answer["signature"]["channels"][0] == f"tau_J_d{j + 1}"
     assert all(1.5 <= p[f"Fs{i}"] / p[f"Fc{i}"] <= 2.5 for i in range(1, 8))
     slow, fast = _friction_by_speed(rec, j, p[f"vs{j + 1}"])
     assert slow == pytest.approx(p[f"Fs{j + 1}"], rel=0.15)  # exp(-0.04) .. exp(-0.01) of Fs
@@ -216,11 +214,14 @@ def test_link_side_friction_is_read_by_the_torque_sensors() -> None:
     assert np.abs(read[~sliding]).max() <= 1.01 * (fc + fv * 0.05).max()
 
 
-def test_sigmoid_signature_names_the_joints_it_leaves_most_beside_coulomb_viscous() -> None:
-    """What the published form leaves beyond a Coulomb + viscous fit, per joint, in the drive's
-    loss the recording shows: the signature lists each joint within half of the largest, its
-    channel and velocity, and its figure matches the recording's."""
-    rec, answer = twin("sigmoid_friction", 1.0)
+@pytest.mark.parametrize("effect", ["sigmoid_friction", "stribeck_friction"])
+def test_friction_signature_names_the_joints_it_leaves_most_beside_coulomb_viscous(
+        effect: str) -> None:
+    """What a friction form the library's joint friction lacks leaves beyond a Coulomb +
+    viscous fit, per joint, in the drive's loss the recording shows: the signature lists each
+    joint within half of the largest, its channel and velocity, and its figure matches the
+    recording's."""
+    rec, answer = twin(effect, 1.0)
     sig = answer["signature"]
     left = np.array(sig["beyond_coulomb_viscous_rms"])
     seen = [int(v.removeprefix("dq")) for v in sig["variables"]]
@@ -231,5 +232,9 @@ def test_sigmoid_signature_names_the_joints_it_leaves_most_beside_coulomb_viscou
     j = seen[0] - 1
     basis = np.column_stack([np.sign(dq[:, j]), dq[:, j]])
     fit = basis @ np.linalg.lstsq(basis, loss[:, j], rcond=None)[0]
-    assert np.sqrt(np.mean((loss[:, j] - fit) ** 2)) == pytest.approx(left[j], rel=0.05)
+    # the sigmoid twin's plant has no dry friction; the Stribeck twin's has MuJoCo's, which
+    # holds a joint at rest with any force within +-Fc, not Fc sign(dq): near reversals the
+    # recording departs from the fit by more than the formula says (+18 % on seed 3's joint 2)
+    rel = 0.05 if effect == "sigmoid_friction" else 0.3
+    assert np.sqrt(np.mean((loss[:, j] - fit) ** 2)) == pytest.approx(left[j], rel=rel)
     assert left[j] > 0.02  # the drive's noise: the shape the library lacks is material

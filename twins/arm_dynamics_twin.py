@@ -150,8 +150,8 @@ def make_twin(effect: str | None, magnitude: float | None, seed: int,
                    int(sim_seed.integers(2**31)), arm=arm)
     if effect == "encoder_scale":
         signature = signals.scale_signature(reality, run, RATE, scale)
-    elif effect == "sigmoid_friction":
-        signature = signals.sigmoid_signature(reality, run, RATE)
+    elif effect in ("stribeck_friction", "sigmoid_friction"):
+        signature = signals.friction_signature(effect, reality, run, RATE)
     answer: dict[str, object] = {"effect": effect, "magnitude": magnitude, "params": params,
                                  **({"effects": parts} if effect == MIX else {}),
                                  "torque_offset": [float(b) for b in run.torque_offset],
@@ -178,7 +178,7 @@ def _apply(effect: str, spec: mujoco.MjSpec, magnitude: float | None, rng: np.ra
         viscous = np.array([params[f"Fv{j + 1}"] for j in range(n)])
         reality = Reality(link_side_friction=True, link_side_viscous=viscous, n=n)
     elif effect == "stribeck_friction":
-        reality, params, signature = signals.stribeck(spec, magnitude, rng, scale)
+        reality, params = signals.stribeck(spec, magnitude, rng, scale)
     elif effect == "sigmoid_friction":
         reality, params = signals.sigmoid(magnitude, rng, scale)
     elif effect == "torque_ripple":

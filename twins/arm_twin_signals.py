@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+from numpy.typing import NDArray
 from scipy.special import expit
 
 from serpar.sim.arm import GAZ_FRICTION_PHI
@@ -16,6 +17,8 @@ from serpar.sim.plants.moving_arm import TwinRun
 from serpar.sim.rigid_arm import ArmDynamics
 from serpar.twins.arm_twin_physics import friction
 from serpar.twins.arm_twin_scale import ArmScale
+
+Vec = NDArray[np.float64]
 
 STRIBECK_RATIO = (1.5, 2.5)
 """Static over Coulomb friction Fs / Fc of each drive (harmonic drives: ~1.5-2.5)."""
@@ -56,7 +59,7 @@ def reality(effect: str, mag: float, rng: np.random.Generator, scale: ArmScale
 
 
 def stribeck(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator, scale: ArmScale
-             ) -> tuple[Reality, dict[str, object], dict[str, object]]:
+             ) -> tuple[Reality, dict[str, object]]:
     # Coulomb + viscous as joint_friction (MuJoCo's); the Stribeck excess acts in the drive
     n = scale.n
     params: dict[str, object] = dict(friction(spec, mag, rng, scale))
@@ -67,14 +70,6 @@ def stribeck(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator, scale: A
     params.update({f"Fs{j + 1}": float(ratio[j] * fc[j]) for j in range(n)})
     params.update({f"dFs{j + 1}": float(excess[j]) for j in range(n)})  # the diagnosis' names
     params.update({f"vs{j + 1}": float(vs[j]) for j in range(n)})
-    order = np.argsort(-excess)
-    j = int(order[0]) + 1
-    words = (f"every drive loses extra torque at low speed (|dq| below its vs, 0.02-0.08 rad/s), "
-             f"joint {j} most ({excess[j - 1]:.2f} N m more below {vs[j - 1]:.3f} rad/s): "
-             "friction falling from Fs to Fc with speed, beyond Coulomb + viscous; in the "
-             "command (tau_J_d - tau_J), not in the link-side sensor")
-    signature: dict[str, object] = {"channels": [f"tau_J_d{i + 1}" for i in order],
-                                    "variables": [f"dq{j}"], "words": words}
     width = None
     if not scale.arm.is_panda:
         # the explicit smoothed sign's slope excess / width, over one 0.1 ms step, must move a
@@ -82,7 +77,7 @@ def stribeck(spec: mujoco.MjSpec, mag: float, rng: np.random.Generator, scale: A
         h = PhysicsConfig().timestep
         width = np.maximum(STRIBECK_SMOOTHING, 2.0 * h * excess / scale.plant.inertia_min)
     return (Reality(stribeck_excess=excess, stribeck_speed=vs, stribeck_width=width, n=n),
-            params, signature)
+            params)
 
 
 def sigmoid(mag: float, rng: np.random.Generator, scale: ArmScale
@@ -104,27 +99,40 @@ def sigmoid(mag: float, rng: np.random.Generator, scale: ArmScale
     return Reality(sigmoid_phi=np.stack([phi1, phi2, phi3]), n=n), params
 
 
-def sigmoid_signature(reality: Reality, run: TwinRun, rate: float) -> dict[str, object]:
-    """Where the sigmoid shows beside a Coulomb + viscous friction (the joint friction the
-    library has): per joint, its torque over the true motion less the least-squares fit of
-    sign(dq) and dq; the channels and velocities within half of the largest such leftover
-    (every drive has the sigmoid; a joint whose motion stays mostly above its transition speed
-    shows little beyond a Coulomb level)."""
-    phi1, phi2, phi3 = np.asarray(reality.sigmoid_phi, float)
-    dq = np.gradient(run.q_true, axis=0) * rate
-    loss = phi1 * (expit(phi2 * (dq + phi3)) - expit(phi2 * phi3))
-    left = np.zeros(len(phi1))
-    for j in range(len(phi1)):
+def _beyond_coulomb_viscous(loss: Vec, dq: Vec) -> tuple[Vec, list[int]]:
+    """Per joint, the RMS of a drive's friction ``loss`` (rows x n) less its least-squares fit
+    of sign(dq) and dq (what the library's joint friction takes), and the 1-based joints
+    within half of the largest such leftover, largest first: where a friction form the
+    library lacks shows (every drive has it; a joint that moves mostly far above its
+    transition speed shows little beyond a Coulomb level)."""
+    left = np.zeros(loss.shape[1])
+    for j in range(loss.shape[1]):
         basis = np.column_stack([np.sign(dq[:, j]), dq[:, j]])
         coef = np.linalg.lstsq(basis, loss[:, j], rcond=None)[0]
         left[j] = float(np.sqrt(np.mean((loss[:, j] - basis @ coef) ** 2)))
-    seen = [int(i) + 1 for i in np.argsort(-left) if left[i] >= 0.5 * left.max()]
+    return left, [int(i) + 1 for i in np.argsort(-left) if left[i] >= 0.5 * left.max()]
+
+
+def friction_signature(effect: str, reality: Reality, run: TwinRun, rate: float
+                       ) -> dict[str, object]:
+    """Where a withheld friction form (``stribeck_friction`` or ``sigmoid_friction``) shows:
+    the drives' channels and velocities of :func:`_beyond_coulomb_viscous` over the true
+    motion."""
+    dq = np.gradient(run.q_true, axis=0) * rate
+    if effect == "sigmoid_friction":
+        phi1, phi2, phi3 = np.asarray(reality.sigmoid_phi, float)
+        loss = phi1 * (expit(phi2 * (dq + phi3)) - expit(phi2 * phi3))
+        form = ("a smooth friction, a level phi1 / 2 at speed about an offset, through zero at "
+                "rest over ~1 / phi2 rad/s")
+    else:
+        loss = (reality.stribeck_excess * np.exp(-((dq / reality.stribeck_speed) ** 2))
+                * np.sign(dq))
+        form = "extra friction at low speed (|dq| below its vs), falling from Fs to Fc"
+    left, seen = _beyond_coulomb_viscous(loss, dq)
     j = seen[0]
-    words = (f"every drive loses a smooth friction, a level phi1 / 2 at speed about an offset, "
-             f"through zero at rest over ~1 / phi2 rad/s: beyond a Coulomb + viscous friction "
-             f"it leaves most on joint {j} ({left[j - 1]:.3f} N m RMS; phi1 {phi1[j - 1]:.2f} N m, "
-             f"1 / phi2 {1 / phi2[j - 1]:.3f} rad/s), in the command (tau_J_d), not in the "
-             "link-side sensor")
+    words = (f"every drive loses {form}: beyond a Coulomb + viscous friction it leaves most on "
+             f"joint {j} ({left[j - 1]:.3f} N m RMS), in the command (tau_J_d - tau_J), not in "
+             "the link-side sensor")
     return {"channels": [f"tau_J_d{i}" for i in seen], "variables": [f"dq{i}" for i in seen],
             "beyond_coulomb_viscous_rms": [float(v) for v in left], "words": words}
 
