@@ -58,6 +58,9 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "default: alternate 2-s blocks of the whole recording")
     p.add_argument("--heldout", type=arg_types.span, metavar="START:END",
                    help="arm dynamics: hold out the windows inside START:END seconds (with --train)")
+    p.add_argument("--withhold", action="append", default=[], metavar="EFFECT",
+                   help="diagnose without this candidate (repeatable): how the verdict reads "
+                        "where the library lacks a form, as the blind bench's withheld trials")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_diagnose)
     return p
@@ -118,6 +121,15 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     dynamics = None if train is None else ArmDynamicsConfig(train_span=train, heldout_span=heldout)
     family = family_from_recording(rec, robot, dynamics)
     notes = load_notes(rec) + list(getattr(family, "notes", ()))  # the data's, then the family's
+    withheld = list(dict.fromkeys(getattr(args, "withhold", [])))
+    if withheld:
+        names = [e.name for e in family.effects]
+        unknown = [w for w in withheld if w not in names]
+        if unknown:
+            raise ConfigError(f"--withhold {', '.join(unknown)}: not a candidate of this "
+                              f"recording's family; valid: {', '.join(names)}")
+        family.effects = tuple(e for e in family.effects if e.name not in withheld)
+        notes.append(f"candidates withheld (--withhold): {', '.join(withheld)}")
     prior = None
     if args.model:
 

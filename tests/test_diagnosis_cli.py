@@ -36,6 +36,22 @@ def test_twin_then_diagnose_with_report(tmp_path, capsys) -> None:
     assert model["effects"] == ["thermal_drift"]
 
 
+def test_diagnose_withholds_a_candidate(tmp_path, capsys) -> None:
+    """--withhold takes a candidate out of the library (the blind bench's withheld trials); an
+    unknown name is one line listing the recording's candidates."""
+    out = tmp_path / "twin"
+    assert main(["twin", "--effect", "thermal_drift", "--seed", "2", "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["diagnose", str(out), "--withhold", "gremlins"]) == 2
+    err = capsys.readouterr().err
+    assert "gremlins" in err and "thermal_drift" in err and err.count("\n") == 1
+    assert main(["diagnose", str(out), "--json", "--withhold", "thermal_drift"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["top_effect"] != "thermal_drift"
+    assert "thermal_drift" not in {c["effect"] for c in result["candidates"]}
+    assert "candidates withheld (--withhold): thermal_drift" in result["notes"]
+
+
 def test_twin_bad_effect_lists_choices(tmp_path, capsys) -> None:
     assert main(["twin", "--effect", "gremlins", "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
