@@ -8,7 +8,6 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import expit
 
 from serpar.sim.arm import GAZ_FRICTION_PHI
 from serpar.sim.physics import PhysicsConfig
@@ -113,26 +112,29 @@ def _beyond_coulomb_viscous(loss: Vec, dq: Vec) -> tuple[Vec, list[int]]:
     return left, [int(i) + 1 for i in np.argsort(-left) if left[i] >= 0.5 * left.max()]
 
 
+FRICTION_FORMS = {
+    "sigmoid_friction": "a smooth friction, a level phi1 / 2 at speed about an offset, through "
+                        "zero at rest over ~1 / phi2 rad/s",
+    "stribeck_friction": "extra friction at low speed (|dq| below its vs), falling from Fs to Fc"}
+"""The withheld friction forms whose signature :func:`friction_signature` gives, in words."""
+
+
 def friction_signature(effect: str, reality: Reality, run: TwinRun, rate: float
                        ) -> dict[str, object]:
-    """Where a withheld friction form (``stribeck_friction`` or ``sigmoid_friction``) shows:
-    the drives' channels and velocities of :func:`_beyond_coulomb_viscous` over the true
-    motion."""
-    dq = np.gradient(run.q_true, axis=0) * rate
-    if effect == "sigmoid_friction":
-        phi1, phi2, phi3 = np.asarray(reality.sigmoid_phi, float)
-        loss = phi1 * (expit(phi2 * (dq + phi3)) - expit(phi2 * phi3))
-        form = ("a smooth friction, a level phi1 / 2 at speed about an offset, through zero at "
-                "rest over ~1 / phi2 rad/s")
-    else:
-        loss = (reality.stribeck_excess * np.exp(-((dq / reality.stribeck_speed) ** 2))
-                * np.sign(dq))
-        form = "extra friction at low speed (|dq| below its vs), falling from Fs to Fc"
+    """Where a withheld friction form (a key of FRICTION_FORMS, the reality's only drive
+    torque) shows: the drives' channels and velocities of :func:`_beyond_coulomb_viscous`,
+    over the true motion, of the torque the plant's drive itself applies
+    (:meth:`Reality.drive_torque`)."""
+    q = run.q_true
+    dq = np.gradient(q, axis=0) * rate
+    torque = reality.drive_torque()
+    assert torque is not None, "a friction twin's reality has a drive torque"
+    loss = -np.array([torque(q[k], dq[k]) for k in range(len(q))])
     left, seen = _beyond_coulomb_viscous(loss, dq)
     j = seen[0]
-    words = (f"every drive loses {form}: beyond a Coulomb + viscous friction it leaves most on "
-             f"joint {j} ({left[j - 1]:.3f} N m RMS), in the command (tau_J_d - tau_J), not in "
-             "the link-side sensor")
+    words = (f"every drive loses {FRICTION_FORMS[effect]}: beyond a Coulomb + viscous friction "
+             f"it leaves most on joint {j} ({left[j - 1]:.3f} N m RMS), in the command "
+             "(tau_J_d - tau_J), not in the link-side sensor")
     return {"channels": [f"tau_J_d{i}" for i in seen], "variables": [f"dq{i}" for i in seen],
             "beyond_coulomb_viscous_rms": [float(v) for v in left], "words": words}
 
