@@ -29,7 +29,9 @@ Vec = NDArray[np.float64]
 Rows = NDArray[np.int64]
 
 MAX_TERMS = 4
-"""Most groups one empirical term holds: more is a model of its own, not a residual."""
+"""Fewest groups one empirical term may hold; it may hold one per residual channel where the
+residual has more (a friction form in every drive of an arm is a group per drive), not more:
+more is a model of its own, not a residual."""
 SHORTLIST = 6
 """Groups that best fit what is left, each refitted with the model at each step; of those
 that earn on both splits and are material, the one that removes most held-out residual
@@ -121,10 +123,13 @@ def fixed_refit(groups: list[BasisGroup], r_train: Vec, r_held: Vec, train: Rows
 
 
 def select_terms(groups: list[BasisGroup], refit: Refit, train: Rows, held: Rows,
-                 n_channels: int, max_terms: int = MAX_TERMS) -> list[tuple[int, Vec, float]]:
+                 n_channels: int, max_terms: int | None = None) -> list[tuple[int, Vec, float]]:
     """Forward selection: the group that best fits what is left enters, refitted with the
     model, when it earns its columns on both splits. (group index, coefficients, held-out
-    chi-square drop) in the order they entered; the coefficients of the last joint fit."""
+    chi-square drop) in the order they entered; the coefficients of the last joint fit.
+    ``max_terms``: default, :data:`MAX_TERMS` or one per channel where there are more."""
+    if max_terms is None:
+        max_terms = max(MAX_TERMS, n_channels)
     cache: dict[tuple[int, int], Vec] = {}
     res_t, res_h, _ = refit([])
     chosen: list[int] = []

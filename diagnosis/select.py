@@ -9,7 +9,8 @@ parameters* when it lowers the information criterion on both splits:
     training:  chi^2 drop > k ln(n_train)     (BIC with the recording's noise model)
     held-out:  chi^2 drop > k ln(n_heldout)   (the same price, paid on data the fit never saw)
 
-Of the candidates that earn, the one with the lowest held-out chi-square is added. Selection
+Of the candidates that earn, the one with the lowest held-out chi-square plus its price
+(k ln n_heldout) is added: of two that fit alike, the one with fewer parameters. Selection
 stops when none earns, or when the held-out residual has reached the noise floor (its
 chi-square test against unit-variance noise gives p >= ``alpha``) in every independent part
 of the data the family names (``residual_parts``: an episode's chamfer slides are tested on
@@ -109,7 +110,7 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
     while step < cfg.max_effects and beyond_noise(family, path[-1], heldout, cfg.alpha):
         step += 1
         current = path[-1]
-        best: tuple[Fit, dict[str, Effect]] | None = None
+        best: tuple[Fit, dict[str, Effect], float] | None = None
         for effect in family.effects:
             if effect.name in current.active:
                 continue
@@ -124,8 +125,12 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
             d_bic, d_held, ok = earns(current, new)
             scores.append(CandidateScore(step, effect.name, effect.n_params, d_bic, d_held,
                                          new.heldout_rms, ok))
-            if ok and (best is None or new.heldout_chi2 < best[0].heldout_chi2):
-                best = new, new_fixed
+            # the held-out chi-square with the price of the parameters: where two candidates
+            # fit alike, the one with fewer parameters (a relative change of the links' inertia
+            # beside their full inertial parameters)
+            net = new.heldout_chi2 + new.n_params * float(np.log(max(new.n_heldout, 2)))
+            if ok and (best is None or net < best[2]):
+                best = new, new_fixed, net
         if best is None:
             break
         path.append(best[0])

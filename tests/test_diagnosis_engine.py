@@ -253,3 +253,37 @@ def test_two_candidates_the_data_cannot_tell_apart_are_a_or_b() -> None:
     rng = np.random.default_rng(0)
     a = rng.normal(size=(200, 3))
     assert abs(vuong_z(a, a, 200)) == 0.0 and vuong_z(a, 2 * a, 200) > 5
+
+
+class NestedLines(Line):
+    """Line with ``wobbly``: the slope plus two columns of its own (t, sin 40t, cos 40t): a
+    candidate that holds the slope as a special case."""
+
+    def __init__(self, truth: dict[str, float], seed: int = 0) -> None:
+        super().__init__(truth, seed)
+        self.y = self.y + truth.get("wobble", 0.0) * np.sin(40 * self.t)
+        self.effects += (Effect("wobbly", "slope and wobble", ("slope", "a", "b"), ("m/s", "m", "m"),
+                                np.zeros(3), np.full(3, -1.0), np.full(3, 1.0)),)
+
+    def residual(self, params, rows):
+        r = super().residual({k: v for k, v in params.items() if k != "wobbly"}, rows)
+        if "wobbly" in params:
+            t = self.t[rows]
+            s, a, b = params["wobbly"]
+            r = r + (s * t + a * np.sin(40 * t) + b * np.cos(40 * t)) / SIGMA
+        return r
+
+
+def test_of_two_candidates_that_fit_alike_the_one_with_fewer_parameters_is_selected() -> None:
+    """A wobble too small to pay for its two parameters on the held-out rows (it lowers their
+    chi-square by a few units, below 2 ln n): the slope is selected, not the candidate that
+    holds it with the wobble; a wobble large enough to pay its price selects that one."""
+    fam = NestedLines({"slope": 0.02, "wobble": 0.003}, seed=3)
+    train, held = fam.split(None)
+    with_slope = fit_model(fam, ("slope",), train, held)
+    with_wobble = fit_model(fam, ("wobbly",), train, held)
+    gain = with_slope.heldout_chi2 - with_wobble.heldout_chi2
+    assert 0 < gain < 2 * np.log(held.size)  # it fits the held-out rows better, not by its price
+    assert [f.effect for f in diagnose(fam).findings][:1] == ["slope"]
+    big = diagnose(NestedLines({"slope": 0.02, "wobble": 0.01}))
+    assert [f.effect for f in big.findings][:1] == ["wobbly"]
