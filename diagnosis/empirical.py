@@ -39,8 +39,25 @@ enters. The best fit on training rows alone may be a linear drift that the held-
 (later in time) refute, where a saturating one holds."""
 MIN_OWN_SHARE = 0.05
 """A group's own contribution on the held-out rows must reach this share of the excess
-held-out chi-square before it: with a many-parameter model refitted alongside, a group of
-negligible size can otherwise "earn" by letting the model's parameters move."""
+held-out chi-square before it, in the channel it acts on (all channels for a group over the
+whole residual), and its own price: with a many-parameter model refitted alongside, a group
+of negligible size can otherwise "earn" by letting the model's parameters move. Per channel:
+a drive whose friction leaves 6 x sigma is material beside another's 12 x sigma."""
+
+
+def _excess(r: Vec, column: int | None, n_channels: int) -> float:
+    """Excess chi-square of the held-out residual ``r`` (row-major) over unit noise, in one
+    channel or (None) in all."""
+    part = r if column is None else r.reshape(-1, n_channels)[:, column]
+    return max(float(part @ part) - part.size, 0.0)
+
+
+def _material(group: BasisGroup, own: Vec, before: Vec, n_channels: int) -> bool:
+    """Whether a group's own held-out contribution ``own`` is material beside what was left in
+    its channel (``before``: the held-out residual without it, row-major)."""
+    size = float(own @ own)
+    return (size >= MIN_OWN_SHARE * _excess(before, group.column, n_channels)
+            and size > group.width * np.log(max(before.size, 2)))
 
 
 def design(groups: list[BasisGroup], chosen: list[int], rows: Rows, n_channels: int,
@@ -149,7 +166,7 @@ def select_terms(groups: list[BasisGroup], refit: Refit, train: Rows, held: Rows
             held_drop = float(res_h @ res_h - new_h @ new_h)
             # its own share of the held-out prediction, not the model's refit, must be material
             own = design(groups, [i], held, n_channels, cache) @ new_coef[-k:]
-            material = float(own @ own) >= MIN_OWN_SHARE * max(float(res_h @ res_h) - res_h.size, 0.0)
+            material = _material(groups[i], own, res_h, n_channels)
             if (train_drop > k * np.log(res_t.size) and held_drop > k * np.log(res_h.size)
                     and material and (best is None or held_drop > best[1])):
                 best = i, held_drop, new_t, new_h, new_coef
@@ -161,12 +178,12 @@ def select_terms(groups: list[BasisGroup], refit: Refit, train: Rows, held: Rows
     # a group that entered big and shrank once later ones came is no longer material: leave
     # it out and refit the rest
     held0 = refit([])[1] if chosen else np.zeros(0)
-    excess0 = max(float(held0 @ held0) - held0.size, 0.0)
     while chosen:
         sizes = np.cumsum([0] + [_values(groups[c], train, cache).shape[1] for c in chosen])
         own = [design(groups, [g], held, n_channels, cache) @ coef[sizes[i]:sizes[i + 1]]
                for i, g in enumerate(chosen)]
-        small = [i for i, o in enumerate(own) if float(o @ o) < MIN_OWN_SHARE * excess0]
+        small = [i for i, o in enumerate(own)
+                 if not _material(groups[chosen[i]], o, held0, n_channels)]
         if not small:
             break
         del chosen[small[0]], drops[small[0]]
