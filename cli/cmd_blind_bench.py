@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from serpar.checks.blind_bench import KINDS, RMS_TARGET, blind_bench, check_robot
+from serpar.checks.blind_bench import KINDS, RMS_TARGET, Trial, blind_bench, check_robot
 from serpar.checks.blind_bench_summary import summarise
 from serpar.cli import arg_types
 from serpar.cli.output import print_json, progress, table
@@ -41,8 +41,22 @@ def cmd_blind_bench(args: argparse.Namespace) -> int:
     default = (ANY_ARM,) if args.robot else tuple(DOMAINS)
     domains = tuple(args.domain) if args.domain else default
     check_robot(domains, args.robot)
-    bar = progress(args.trials, "blind-bench", enabled=sys.stderr.isatty())
-    trials = blind_bench(args.trials, args.seed, domains, progress=lambda _t: bar.update(1),
+    tty = sys.stderr.isatty()
+    bar = progress(args.trials, "blind-bench", enabled=tty)
+    done = [0]
+
+    def on_trial(t: Trial) -> None:
+        # a bar on a terminal; elsewhere (a headless run, a log file) one line per trial
+        done[0] += 1
+        if tty:
+            bar.update(1)
+        else:
+            print(f"blind-bench {done[0]}/{args.trials}: trial {t.index} {t.effect}: "
+                  f"{', '.join(t.established) or 'nothing established'} "
+                  f"({'A or B' if t.undecided else 'right' if t.correct else 'NOT right'}, "
+                  f"{t.diagnosis_s:.0f} s)", file=sys.stderr, flush=True)
+
+    trials = blind_bench(args.trials, args.seed, domains, progress=on_trial,
                          library_only=args.library_only,
                          kinds=tuple(args.kind) if args.kind else None, robot=args.robot,
                          workers=args.workers)

@@ -8,6 +8,8 @@ nominal model, the coupled wrist, and the CLI's one-line refusals.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -282,3 +284,15 @@ def test_a_payload_on_the_iiwa_is_not_taken_for_a_unit_error() -> None:
     rec, _ = registry_twin("mix", None, 0, "arm_dynamics", 1.0, IIWA)
     family = family_from_recording(rec, load_robot(IIWA))
     assert family.n == 7
+
+
+def test_a_headless_blind_bench_says_each_trial_on_a_line(capsys) -> None:
+    """Off a terminal (a log, a CI job) the bench writes one line per finished trial to stderr,
+    the summary object still last on stdout."""
+    assert main(["blind-bench", "--domain", "arm_static", "--trials", "2", "--kind", "none",
+                 "--json"]) == 0
+    out, err = capsys.readouterr()
+    lines = [line for line in err.splitlines() if line.startswith("blind-bench ")]
+    assert [line.split(":")[0] for line in lines] == ["blind-bench 1/2", "blind-bench 2/2"]
+    assert all("nothing established (right" in line for line in lines), err
+    assert json.loads(out)["summary"]["trials"] == 2
