@@ -21,6 +21,7 @@ right nor wrong: counted (``a_or_b``) and left out of its kind's share.
 from __future__ import annotations
 
 import multiprocessing
+import os
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -32,6 +33,7 @@ from serpar.diagnosis.choose import family_from_recording
 from serpar.diagnosis.select import diagnose
 from serpar.errors import ConfigError
 from serpar.sim.robot_file import load_robot
+from serpar.tasks.worker_life import end_with_parent
 from serpar.twins.registry import ANY_ARM, DOMAINS, domain_module, magnitude_range, make_twin
 
 RMS_TARGET = 1.5
@@ -237,7 +239,8 @@ def blind_bench(trials: int, seed: int, domains: tuple[str, ...] = tuple(DOMAINS
             if progress is not None:
                 progress(out[-1])
         return out
-    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                             initializer=end_with_parent, initargs=(os.getpid(),)) as pool:
         futures = {pool.submit(run_trial, k, d, e, mag, s, robot): (k, d, e, mag, s)
                    for k, (d, e, mag, s) in enumerate(drawn)}
         for done in as_completed(futures):

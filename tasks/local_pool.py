@@ -29,6 +29,7 @@ from typing import Any
 
 from serpar.tasks.episode import signal_name
 from serpar.tasks.episode_config import EpisodeConfig
+from serpar.tasks.worker_life import end_with_parent
 
 Record = dict[str, object]
 GRACE_S = 120.0
@@ -46,7 +47,8 @@ def _on_signal(signum: int, frame: FrameType | None) -> None:
         raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
-def _init_worker() -> None:
+def _init_worker(parent: int) -> None:
+    end_with_parent(parent)
     signal.signal(signal.SIGINT, _on_signal)
     signal.signal(signal.SIGTERM, _on_signal)
 
@@ -79,6 +81,7 @@ class LocalPool:
 
     def _new_pool(self) -> ProcessPoolExecutor:
         return ProcessPoolExecutor(max_workers=self.workers, initializer=_init_worker,
+                                   initargs=(os.getpid(),),
                                    mp_context=multiprocessing.get_context("spawn"))
 
     def _submit(self, cfg: EpisodeConfig, label: str | None, solo: bool) -> bool:
