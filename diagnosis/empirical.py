@@ -29,9 +29,9 @@ Vec = NDArray[np.float64]
 Rows = NDArray[np.int64]
 
 MAX_TERMS = 4
-"""Fewest groups one empirical term may hold; it may hold one per residual channel where the
-residual has more (a friction form in every drive of an arm is a group per drive), not more:
-more is a model of its own, not a residual."""
+"""Most groups one empirical term holds where the residual has fewer channels; where it has
+more, one per channel (a friction form in every drive of an arm is a group per drive). More
+than that is a model of its own, not a residual."""
 SHORTLIST = 6
 """Groups that best fit what is left, each refitted with the model at each step; of those
 that earn on both splits and are material, the one that removes most held-out residual
