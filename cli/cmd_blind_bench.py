@@ -43,15 +43,16 @@ def cmd_blind_bench(args: argparse.Namespace) -> int:
     check_robot(domains, args.robot)
     tty = sys.stderr.isatty()
     bar = progress(args.trials, "blind-bench", enabled=tty)
-    done = [0]
+    done = 0
 
     def on_trial(t: Trial) -> None:
         # a bar on a terminal; elsewhere (a headless run, a log file) one line per trial
-        done[0] += 1
+        nonlocal done
+        done += 1
         if tty:
             bar.update(1)
         else:
-            print(f"blind-bench {done[0]}/{args.trials}: trial {t.index} {t.effect}: "
+            print(f"blind-bench {done}/{args.trials}: trial {t.index} {t.effect}: "
                   f"{', '.join(t.established) or 'nothing established'} "
                   f"({'A or B' if t.undecided else 'right' if t.correct else 'NOT right'}, "
                   f"{t.diagnosis_s:.0f} s)", file=sys.stderr, flush=True)

@@ -121,7 +121,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     dynamics = None if train is None else ArmDynamicsConfig(train_span=train, heldout_span=heldout)
     family = family_from_recording(rec, robot, dynamics)
     notes = load_notes(rec) + list(getattr(family, "notes", ()))  # the data's, then the family's
-    withheld = list(dict.fromkeys(getattr(args, "withhold", [])))
+    withheld = list(dict.fromkeys(args.withhold))
     if withheld:
         names = [e.name for e in family.effects]
         unknown = [w for w in withheld if w not in names]

@@ -128,7 +128,8 @@ def friction_signature(effect: str, reality: Reality, run: TwinRun, rate: float
     q = run.q_true
     dq = np.gradient(q, axis=0) * rate
     torque = reality.drive_torque()
-    assert torque is not None, "a friction twin's reality has a drive torque"
+    if torque is None:
+        raise ValueError(f"{effect}: the twin's reality applies no drive torque, so no friction to locate")
     loss = -np.array([torque(q[k], dq[k]) for k in range(len(q))])
     left, seen = _beyond_coulomb_viscous(loss, dq)
     j = seen[0]
