@@ -202,7 +202,7 @@ class ArmDynamicsFamily:
 
     def empirical_library(self) -> list[BasisGroup]:
         """Shapes in each joint's angle, velocity and time (diagnosis/arm_dynamics_empirical.py)."""
-        return arm_library(self.terms, self.channels, self._blocks)
+        return arm_library(self.terms, self.channels, self._blocks, self.cfg.stick_velocity)
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         if self.cfg.train_span is not None and self.cfg.heldout_span is not None:

@@ -47,15 +47,55 @@ class WithTerm:
 
     def residual(self, params: Mapping[str, Vec], rows: Rows) -> Vec:
         r = self.inner.residual(self._inner(params), rows)
-        if EMPIRICAL in params:
-            r = r - design(self._groups, self._chosen, rows, self._channels) @ params[EMPIRICAL]
-        return r
+        if EMPIRICAL not in params:
+            return r
+        r = r - design(self._groups, self._chosen, rows, self._channels) @ params[EMPIRICAL]
+        band = self._band(params[EMPIRICAL], rows)[0]
+        # the inner residual is already outside its own band: a second dead zone adds to it
+        return r if band is None else np.sign(r) * np.maximum(np.abs(r) - band, 0.0)
+
+    def _band(self, coef: Vec, rows: Rows) -> tuple[Vec | None, Vec]:
+        """(band, d band / d coef): the whitened stiction band the chosen friction groups give
+        their channels (None where none is a friction): as wide as the level of the channel's
+        friction as motion starts, where that opposes motion."""
+        weight: dict[int, Vec] = {}
+        level: dict[int, float] = {}
+        onset: dict[int, Vec] = {}
+        at = 0
+        for g in self._chosen:
+            group = self._groups[g]
+            rest, column = group.rest, group.column
+            if rest is not None and column is not None:
+                weight.setdefault(column, np.asarray(rest.weight(rows), float))
+                part = np.zeros(coef.size)
+                part[at:at + group.width] = rest.onset
+                onset[column] = onset.get(column, np.zeros(coef.size)) + part
+                level[column] = level.get(column, 0.0) + float(part @ coef)
+            at += group.width
+        if not weight:
+            return None, np.zeros((0, coef.size))
+        band = np.zeros((len(rows), self._channels))
+        slope = np.zeros((len(rows) * self._channels, coef.size))
+        for column, w in weight.items():
+            if level[column] > 0.0:
+                band[:, column] = w * level[column]
+                slope[column::self._channels] = w[:, None] * onset[column]
+        return band.ravel(), slope
 
     def _jacobian(self, params: Mapping[str, Vec], rows: Rows) -> Vec:
         inner = self.inner.jacobian(self._inner(params), rows)  # type: ignore[attr-defined]
         if EMPIRICAL not in params:
             return inner
-        return np.hstack([inner, -design(self._groups, self._chosen, rows, self._channels)])
+        jac = np.hstack([inner, -design(self._groups, self._chosen, rows, self._channels)])
+        coef = params[EMPIRICAL]
+        band, slope = self._band(coef, rows)
+        if band is None:
+            return jac
+        r = self.inner.residual(self._inner(params), rows) - (
+            design(self._groups, self._chosen, rows, self._channels) @ coef)
+        jac[:, inner.shape[1]:] -= np.sign(r)[:, None] * slope
+        jac[np.abs(r) <= band] = 0.0  # inside the band nothing moves the residual
+        return jac
 
     def split(self, rng: np.random.Generator) -> tuple[Rows, Rows]:
         return self.inner.split(rng)

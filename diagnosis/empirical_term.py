@@ -15,6 +15,33 @@ Rows = NDArray[np.int64]
 
 
 @dataclass(frozen=True)
+class Tuning:
+    """A group's continuous shape parameter (a transition speed, a time constant): the library
+    offers it on a grid, and a selected group is refined to the value the training rows fit
+    best (:func:`serpar.diagnosis.empirical.tune`) within bounds set by the physics."""
+
+    name: str
+    """Its key in the group's ``detail``."""
+    low: float
+    high: float
+    at: Callable[[float], BasisGroup]
+    """The same group (channel, variable, shape) with the parameter at another value."""
+
+
+@dataclass(frozen=True)
+class RestBand:
+    """A friction holds a joint at rest anywhere within the level it has as motion starts: the
+    residual of a row where the joint may be stuck lies unexplained within the band
+    ``weight(rows) x max(level, 0)``, ``level`` = sum over the channel's friction groups of
+    ``onset @ coefficients`` (a term that cancels a fall's level in motion cancels its band)."""
+
+    weight: Callable[[Rows], Vec]
+    """(rows,) the window's share of samples where the joint may be stuck, over sigma."""
+    onset: tuple[float, ...]
+    """The odd part of each column at the stick velocity."""
+
+
+@dataclass(frozen=True)
 class BasisGroup:
     """Basis columns that enter or leave the empirical term together."""
 
@@ -38,6 +65,11 @@ class BasisGroup:
     """Index of the residual channel (within a row) a channel-local group acts on."""
     detail: Mapping[str, float] = field(default_factory=dict)
     """Numbers its words use (a period [deg], a time constant [s], ...)."""
+    tuning: Tuning | None = None
+    """Its continuous shape parameter, where it has one (None: the group is fixed)."""
+    rest: RestBand | None = None
+    """Where it is a friction against motion: how it holds the joint at rest (None: not a
+    friction)."""
 
     @property
     def width(self) -> int:
@@ -59,6 +91,9 @@ SHAPES: dict[str, str] = {
                    "zero at rest smoothly, about an offset (a sigmoid)",
     "stribeck": "a force opposing motion that falls from {amplitude} at standstill as {variable} "
                 "grows (~{speed:.2g} /s): friction that is higher near standstill (Stribeck)",
+    "stribeck along": "a force along the motion, largest near standstill ({amplitude}), that "
+                      "fades as {variable} grows (~{speed:.2g} /s): not a friction (a friction "
+                      "opposes motion)",
     "proportional": "off by {coefficient} x {variable} ({amplitude} RMS): a scale error "
                     "(encoder, screw lead or gear ratio)",
     "drift": "a drift with time, {amplitude} over the recording ({profile}): thermal growth or "
@@ -74,7 +109,7 @@ class Term:
     heldout_drop: float
     """Held-out chi-square removed when it entered."""
     frequency: float
-    """Share of the resampled folds on which the same (channel, variable, shape) was selected."""
+    """Share of the resampled folds on which it held up (material, acting the same way)."""
     size: float
     """Its size over all rows [unit of the channel]: the range a drift covers, else the RMS
     of its contribution."""
@@ -82,7 +117,9 @@ class Term:
     def words(self) -> str:
         g = self.group
         amp = f"{self.size * np.sqrt(2.0) if g.shape == 'periodic' else self.size:.2g} {g.unit}"
-        text = SHAPES[g.shape].format(
+        # a fall whose coefficient is negative acts along the motion: not a friction
+        shape = "stribeck along" if g.shape == "stribeck" and self.coefficients[0] < 0 else g.shape
+        text = SHAPES[shape].format(
             variable=g.variable, amplitude=amp, coefficient=f"{self.coefficients[0]:.3g}", step=f"{2 * abs(self.coefficients[0]):.2g} {g.unit}",
             level=f"{2 * abs(self.coefficients[-1]):.2g} {g.unit}",
             period_deg=g.detail.get("period_deg", 0.0), speed=g.detail.get("speed", 0.0),
@@ -105,7 +142,8 @@ class EmpiricalTerm:
     heldout_rms_after: float
     """Held-out whitened RMS with the kept terms added (1 = the stated noise)."""
     rejected: tuple[str, ...] = ()
-    """Groups the main split selected but the folds did not, with their frequency."""
+    """Groups the main split selected that did not hold up on the folds, with on how many
+    they did."""
 
     def words(self) -> str:
         if not self.terms:
