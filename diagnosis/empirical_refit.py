@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from serpar.diagnosis.empirical import BasisGroup, Refit, design
@@ -38,9 +39,7 @@ class WithTerm:
         if callable(getattr(family, "jacobian", None)):
             self.jacobian = self._jacobian
         if callable(getattr(family, "baseline_columns", None)):
-            # the term's columns do not depend on the baseline: the inner family's are these
-            self.baseline_columns = lambda params, rows: family.baseline_columns(  # type: ignore[attr-defined]
-                self._inner(params), rows)
+            self.baseline_columns = self._baseline_columns
 
     def _inner(self, params: Mapping[str, Vec]) -> dict[str, Vec]:
         return {n: v for n, v in params.items() if n != EMPIRICAL}
@@ -82,20 +81,35 @@ class WithTerm:
                 slope[column::self._channels] = w[:, None] * onset[column]
         return band.ravel(), slope
 
+    def _before_band(self, params: Mapping[str, Vec], rows: Rows) -> Vec:
+        """The residual with the term, before the term's own stiction band."""
+        return self.inner.residual(self._inner(params), rows) - (
+            design(self._groups, self._chosen, rows, self._channels) @ params[EMPIRICAL])
+
     def _jacobian(self, params: Mapping[str, Vec], rows: Rows) -> Vec:
         inner = self.inner.jacobian(self._inner(params), rows)  # type: ignore[attr-defined]
         if EMPIRICAL not in params:
             return inner
         jac = np.hstack([inner, -design(self._groups, self._chosen, rows, self._channels)])
-        coef = params[EMPIRICAL]
-        band, slope = self._band(coef, rows)
+        band, slope = self._band(params[EMPIRICAL], rows)
         if band is None:
             return jac
-        r = self.inner.residual(self._inner(params), rows) - (
-            design(self._groups, self._chosen, rows, self._channels) @ coef)
+        r = self._before_band(params, rows)
         jac[:, inner.shape[1]:] -= np.sign(r)[:, None] * slope
         jac[np.abs(r) <= band] = 0.0  # inside the band nothing moves the residual
         return jac
+
+    def _baseline_columns(self, params: Mapping[str, Vec], rows: Rows) -> sp.csr_matrix | Vec:
+        """The inner family's (the term's columns do not depend on the baseline), zero where
+        the term's stiction band holds the residual."""
+        cols = self.inner.baseline_columns(self._inner(params), rows)  # type: ignore[attr-defined]
+        if EMPIRICAL not in params:
+            return cols
+        band = self._band(params[EMPIRICAL], rows)[0]
+        if band is None:
+            return cols
+        outside = (np.abs(self._before_band(params, rows)) > band).astype(float)
+        return sp.csr_matrix(sp.diags(outside) @ cols) if sp.issparse(cols) else cols * outside[:, None]
 
     def split(self, rng: np.random.Generator) -> tuple[Rows, Rows]:
         return self.inner.split(rng)
