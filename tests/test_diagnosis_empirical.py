@@ -14,7 +14,16 @@ from scipy.special import expit
 
 from serpar.diagnosis import Effect
 from serpar.diagnosis.arm_dynamics_family import family_from_recording
-from serpar.diagnosis.empirical import BasisGroup, Tuning, characterise, fixed_refit, select_terms
+from serpar.diagnosis.empirical import (
+    BasisGroup,
+    RestBand,
+    Tuning,
+    characterise,
+    fixed_refit,
+    select_terms,
+)
+from serpar.diagnosis.empirical_refit import EMPIRICAL, WithTerm
+from serpar.diagnosis.fit import fit_model
 from serpar.diagnosis.locate import locate_rows
 from serpar.diagnosis.residual import consecutive_noise_ratio
 from serpar.diagnosis.select import diagnose
@@ -310,3 +319,68 @@ def test_a_selected_speed_is_refined_to_the_one_the_data_hold() -> None:
             assert abs(speed - 0.035) < 0.05 * 0.035 and emp.heldout_rms_after < 1.1
         else:
             assert speed in (0.02, 0.05) and emp.heldout_rms_after > 1.5
+
+
+class Drive:
+    """One drive, moving on some rows and stuck on others: its measured torque carries a dry
+    friction F sign(v) in motion and, stuck, any static value within +-F (here uniform); the
+    library holds only the offset. Whitened with unit sigma."""
+
+    kind = "synthetic drive"
+
+    def __init__(self, level: float = 8.0, n: int = 2000, seed: int = 0) -> None:
+        rng = np.random.default_rng(seed)
+        t = np.arange(n)
+        self.v = np.where((t // 40) % 3 == 0, 0.0, np.sin(0.05 * t))
+        self.stuck = (self.v == 0.0).astype(float)
+        held = rng.uniform(-level, level, n)
+        self.y = np.where(self.stuck > 0, held, level * np.sign(self.v)) + rng.normal(size=n)
+        self.n_samples = n
+        self.baseline = Effect("baseline", "offset", ("offset",), ("N m",), np.zeros(1),
+                               np.full(1, -10.0), np.full(1, 10.0))
+        self.effects = ()
+
+    def residual(self, params, rows):
+        return self.y[rows] - params["baseline"][0]
+
+    def jacobian(self, params, rows):
+        return -np.ones((len(rows), 1))
+
+    def split(self, rng):
+        rows = np.arange(self.n_samples)
+        held = (rows // 100) % 2 == 1
+        return rows[~held], rows[held]
+
+    def step(self) -> BasisGroup:
+        s, w = np.sign(self.v)[:, None], self.stuck
+        return BasisGroup("y", "v", "reversal step", "sign(v)", "N m",
+                          columns=lambda rows: s[rows], physical=lambda rows: s[rows], column=0,
+                          rest=RestBand(lambda rows: w[rows], (1.0,)))
+
+
+def test_a_dry_friction_holds_its_stuck_joint_within_its_level() -> None:
+    """A dry friction of 8 sigma whose stuck rows hold any value within +-8: with its stiction
+    band the step leaves no more than the noise (0.83 sigma: the band also takes the noise of
+    stuck rows), its level recovered within 3 %; without it, the held-out rows keep 2.9 sigma.
+    The band's Jacobian matches differences."""
+    drive = Drive()
+    group = drive.step()
+    bare = replace(group, rest=None)
+    rows = np.arange(drive.n_samples)
+    train, held = drive.split(None)
+    for g, bound in ((group, 1.1), (bare, 2.0)):
+        w = WithTerm(drive, [g], [0], 1)
+        fit = fit_model(w, (EMPIRICAL,), train, held)
+        r = w.residual(fit.params, held)
+        rms = float(np.sqrt(np.mean(r**2)))
+        if g is group:
+            assert rms < bound and abs(fit.params[EMPIRICAL][0] - 8.0) < 0.03 * 8.0
+        else:
+            assert rms > bound  # the stuck rows' static friction left unexplained
+    w = WithTerm(drive, [group], [0], 1)
+    p = {"baseline": np.array([0.3]), EMPIRICAL: np.array([6.0])}
+    jac = w.jacobian(p, rows)
+    for k, name in enumerate(("baseline", EMPIRICAL)):
+        up = {**p, name: p[name] + 1e-6}
+        diff = (w.residual(up, rows) - w.residual(p, rows)) / 1e-6
+        assert np.allclose(jac[:, k], diff, atol=1e-4)
