@@ -69,6 +69,20 @@ def _material(group: BasisGroup, own: Vec, before: Vec, n_channels: int) -> bool
             and size > group.width * np.log(max(before.size, 2)))
 
 
+def _earns_in_motion(group: BasisGroup, before: Vec, after: Vec, rows: Rows,
+                     n_channels: int) -> bool:
+    """A friction (a group with a stiction band) must earn its columns where its joint moves:
+    at rest its band would otherwise "explain" noise (a wider band holds more of it) and a
+    friction of any level would pay for itself on a joint that is often stuck."""
+    if group.rest is None or group.column is None:
+        return True
+    moving = np.ones((len(rows), n_channels), bool)
+    moving[:, group.column] = np.asarray(group.rest.weight(rows)) == 0.0
+    m = moving.ravel()
+    drop = float(before[m] @ before[m] - after[m] @ after[m])
+    return drop > group.width * np.log(max(before.size, 2))
+
+
 def design(groups: list[BasisGroup], chosen: list[int], rows: Rows, n_channels: int,
            cache: dict[tuple[int, int], Vec] | None = None) -> Vec:
     """(rows x channels, sum k) whitened columns of the chosen groups over the whole residual."""
@@ -190,7 +204,9 @@ def select_terms(groups: list[BasisGroup], refit: Refit, train: Rows, held: Rows
             own = design(groups, [i], held, n_channels, cache) @ new_coef[-k:]
             material = _material(groups[i], own, res_h, n_channels)
             if (train_drop > k * np.log(res_t.size) and held_drop > k * np.log(res_h.size)
-                    and material and (best is None or held_drop > best[1])):
+                    and material and _earns_in_motion(groups[i], res_t, new_t, train, n_channels)
+                    and _earns_in_motion(groups[i], res_h, new_h, held, n_channels)
+                    and (best is None or held_drop > best[1])):
                 best = i, held_drop, new_t, new_h, new_coef
         if best is None:
             break
