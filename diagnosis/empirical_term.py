@@ -14,6 +14,11 @@ Vec = NDArray[np.float64]
 Rows = NDArray[np.int64]
 
 
+Refit = Callable[[list[int]], tuple[Vec, Vec, Vec]]
+"""chosen group indices -> (training residual, held-out residual, coefficients) of the model
+refitted together with those groups."""
+
+
 @dataclass(frozen=True)
 class Tuning:
     """A group's continuous shape parameter (a transition speed, a time constant): the library
