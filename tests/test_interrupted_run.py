@@ -202,7 +202,12 @@ def test_serpar_run_interrupted_after_its_first_hole(tmp_path, sig, code):
     finally:
         proc.kill()
     lines += rest.splitlines()
-    assert proc.returncode == code, err
+    # what the child inherited (an ignored or blocked SIGINT survives exec) and what it printed:
+    # the signal this case sends has been seen to go unnoticed under load
+    status = Path("/proc/self/status")
+    inherited = [s for s in status.read_text().splitlines() if s.startswith(("SigBlk", "SigIgn"))] \
+        if status.exists() else []
+    assert proc.returncode == code, f"{err}\nstdout kinds: {[strict(x)['kind'] for x in lines]}; {inherited}"
     records = [strict(line) for line in lines]
     summary = records[-1]
     assert summary["kind"] == "summary" and summary["holes"] == 1 and summary["episodes"] == 1
