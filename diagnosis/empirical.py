@@ -32,6 +32,8 @@ from serpar.diagnosis.empirical_term import (
     RestBand,
     Term,
     Tuning,
+    columns_at,
+    design,
 )
 from serpar.diagnosis.empirical_tune import tune
 from serpar.diagnosis.stability import MIN_FREQUENCY
@@ -85,30 +87,6 @@ def _earns_in_motion(group: BasisGroup, before: Vec, after: Vec, rows: Rows,
     return drop > group.width * np.log(max(before.size, 2))
 
 
-def design(groups: list[BasisGroup], chosen: list[int], rows: Rows, n_channels: int,
-           cache: dict[tuple[int, int], Vec] | None = None) -> Vec:
-    """(rows x channels, sum k) whitened columns of the chosen groups over the whole residual."""
-    cache = {} if cache is None else cache
-    blocks: list[Vec] = []
-    for g in chosen:
-        x = _values(groups[g], rows, cache)
-        if groups[g].column is None:
-            blocks.append(x)
-        else:
-            full = np.zeros((len(rows), n_channels, x.shape[1]))
-            full[:, groups[g].column, :] = x
-            blocks.append(full.reshape(len(rows) * n_channels, -1))
-    return np.hstack(blocks) if blocks else np.zeros((len(rows) * n_channels, 0))
-
-
-def _values(group: BasisGroup, rows: Rows, cache: dict[tuple[int, int], Vec]) -> Vec:
-    key = (id(group), id(rows))
-    if key not in cache:
-        x = np.asarray(group.columns(rows), float)
-        cache[key] = x.reshape(len(rows) if group.column is not None else x.shape[0], -1)
-    return cache[key]
-
-
 def _drop(group: BasisGroup, x: Vec, r: Vec, rows: Rows) -> float:
     """Chi-square drop of projecting the residual ``r`` (rows, channels) onto ``x``; for a
     friction with a stiction band, of the best level with its band (a residual left mostly
@@ -143,10 +121,10 @@ def _screen(groups: list[BasisGroup], rows: Rows, r: Vec, cache: dict[tuple[int,
         if g.column is None:
             dense.setdefault(g.label, []).append(i)
         else:
-            out.append((_drop(g, _values(g, rows, cache), r, rows), i))
+            out.append((_drop(g, columns_at(g, rows, cache), r, rows), i))
     y = r.ravel()
     for members in dense.values():
-        xs = [_values(groups[i], rows, cache) for i in members]
+        xs = [columns_at(groups[i], rows, cache) for i in members]
         x = np.hstack(xs)
         gram_inv = np.linalg.pinv(x.T @ x)
         coef = gram_inv @ (x.T @ y)
@@ -195,7 +173,7 @@ def select_terms(groups: list[BasisGroup], refit: Refit, train: Rows, held: Rows
             break
         best = None
         for _, i in sorted(scores, reverse=True)[:SHORTLIST]:
-            k = _values(groups[i], train, cache).shape[1]
+            k = columns_at(groups[i], train, cache).shape[1]
             new_t, new_h, new_coef = refit(chosen + [i])
             train_drop = float(res_t @ res_t - new_t @ new_t)
             held_drop = float(res_h @ res_h - new_h @ new_h)
@@ -216,7 +194,7 @@ def select_terms(groups: list[BasisGroup], refit: Refit, train: Rows, held: Rows
     # it out and refit the rest
     held0 = refit([])[1] if chosen else np.zeros(0)
     while chosen:
-        sizes = np.cumsum([0] + [_values(groups[c], train, cache).shape[1] for c in chosen])
+        sizes = np.cumsum([0] + [columns_at(groups[c], train, cache).shape[1] for c in chosen])
         own = [design(groups, [g], held, n_channels, cache) @ coef[sizes[i]:sizes[i + 1]]
                for i, g in enumerate(chosen)]
         small = [i for i, o in enumerate(own)
@@ -225,7 +203,7 @@ def select_terms(groups: list[BasisGroup], refit: Refit, train: Rows, held: Rows
             break
         del chosen[small[0]], drops[small[0]]
         res_t, res_h, coef = refit(chosen)
-    sizes = np.cumsum([0] + [_values(groups[c], train, cache).shape[1] for c in chosen])
+    sizes = np.cumsum([0] + [columns_at(groups[c], train, cache).shape[1] for c in chosen])
     return [(g, coef[sizes[i]:sizes[i + 1]], drops[i]) for i, g in enumerate(chosen)]
 
 

@@ -106,6 +106,35 @@ SHAPES: dict[str, str] = {
 }
 
 
+def design(groups: list[BasisGroup], chosen: list[int], rows: Rows, n_channels: int,
+           cache: dict[tuple[int, int], Vec] | None = None) -> Vec:
+    """(rows x channels, sum k) whitened columns of the chosen groups over the whole residual."""
+    cache = {} if cache is None else cache
+    blocks: list[Vec] = []
+    for g in chosen:
+        x = columns_at(groups[g], rows, cache)
+        if groups[g].column is None:
+            blocks.append(x)
+        else:
+            full = np.zeros((len(rows), n_channels, x.shape[1]))
+            full[:, groups[g].column, :] = x
+            blocks.append(full.reshape(len(rows) * n_channels, -1))
+    return np.hstack(blocks) if blocks else np.zeros((len(rows) * n_channels, 0))
+
+
+def columns_at(group: BasisGroup, rows: Rows, cache: dict[tuple[int, int], Vec] | None = None
+               ) -> Vec:
+    """(rows, k) a channel-local group's whitened columns, or (rows x channels, k) a group's
+    over the whole residual; ``cache`` keeps them per (group, rows) object."""
+    if cache is None:
+        cache = {}
+    key = (id(group), id(rows))
+    if key not in cache:
+        x = np.asarray(group.columns(rows), float)
+        cache[key] = x.reshape(len(rows) if group.column is not None else x.shape[0], -1)
+    return cache[key]
+
+
 @dataclass(frozen=True)
 class Term:
     group: BasisGroup

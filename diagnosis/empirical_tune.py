@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
-from serpar.diagnosis.empirical_term import BasisGroup, Refit, Tuning
+from serpar.diagnosis.empirical_term import BasisGroup, Refit, Tuning, columns_at, design
 
 Vec = NDArray[np.float64]
 Rows = NDArray[np.int64]
@@ -32,8 +32,8 @@ def tune(groups: list[BasisGroup], refit: Refit, chosen: list[int], train: Rows,
             continue
         c = coef[edges[i]:edges[i + 1]]
         # what is left for this group: the residual with its own contribution given back
-        y_t = r_t + _placed(groups[g], train, n_channels) @ c
-        y_h = r_h + _placed(groups[g], held, n_channels) @ c
+        y_t = r_t + design(groups, [g], train, n_channels) @ c
+        y_h = r_h + design(groups, [g], held, n_channels) @ c
         new = _refined(groups[g], tuning, y_t, train, n_channels)
         if _held_drop(new, y_t, y_h, train, held, n_channels) > _held_drop(
                 groups[g], y_t, y_h, train, held, n_channels):
@@ -52,7 +52,7 @@ def _refined(group: BasisGroup, tuning: Tuning, y: Vec, rows: Rows, n_channels: 
     target = _channel(group, y, n_channels)
 
     def left(log_value: float) -> float:
-        x = _fresh(tuning.at(float(np.exp(log_value))), rows)
+        x = columns_at(tuning.at(float(np.exp(log_value))), rows)
         coef, *_ = np.linalg.lstsq(x, target, rcond=None)
         return float(np.sum((target - x @ coef) ** 2))
     start = np.log(group.detail[tuning.name])
@@ -68,28 +68,13 @@ def _channel(group: BasisGroup, y: Vec, n_channels: int) -> Vec:
     return y.reshape(-1, n_channels)[:, group.column] if group.column is not None else y
 
 
-def _fresh(group: BasisGroup, rows: Rows) -> Vec:
-    x = np.asarray(group.columns(rows), float)
-    return x.reshape(len(rows) if group.column is not None else x.shape[0], -1)
-
-
 def _held_drop(group: BasisGroup, y_t: Vec, y_h: Vec, train: Rows, held: Rows,
                n_channels: int) -> float:
     """Held-out chi-square removed by the group fitted to ``y_t`` on the training rows."""
     t, h = _channel(group, y_t, n_channels), _channel(group, y_h, n_channels)
-    coef, *_ = np.linalg.lstsq(_fresh(group, train), t, rcond=None)
-    fit = _fresh(group, held) @ coef
+    coef, *_ = np.linalg.lstsq(columns_at(group, train), t, rcond=None)
+    fit = columns_at(group, held) @ coef
     return float(2 * h @ fit - fit @ fit)
-
-
-def _placed(group: BasisGroup, rows: Rows, n_channels: int) -> Vec:
-    """(rows x channels, k) the group's whitened columns over the whole residual."""
-    x = _fresh(group, rows)
-    if group.column is None:
-        return x
-    full = np.zeros((len(rows), n_channels, x.shape[1]))
-    full[:, group.column, :] = x
-    return full.reshape(len(rows) * n_channels, -1)
 
 
 __all__ = ["tune"]
