@@ -274,6 +274,21 @@ class EffectModels:
             rate = rate + self.inertia_link_rate[rows] @ params["link_inertia"]
         return rate
 
+    def misread_sensitivity(self, joint: int, sensor: bool, proportional: bool,
+                            step: float = 1e-5) -> Vec:
+        """Every row x n: the model torque's change per unit misreading of ``joint`` (0-based),
+        at zero: a relative scale s (angle, rate and acceleration read x (1 + s)) or, not
+        ``proportional``, an offset [rad] (the angle alone). The model evaluated at the true
+        state, the reading undone, minus at the reading, over the step."""
+        q, dq, ddq = (x.copy() for x in self._state(np.arange(len(self.terms.q)), sensor))
+        if proportional:
+            for x in (q, dq, ddq):
+                x[:, joint] *= 1.0 - step  # / (1 + step), to first order
+        else:
+            q[:, joint] -= step
+        base = self.base_link if sensor else self.base_drive
+        return (self.dyn.link_torque(q, dq, ddq) - base) / step
+
     def _true_state_torque(self, rows: NDArray[np.int64], sensor: bool, offset: Vec | None = None,
                            scale: Vec | None = None) -> Vec:
         """What the model's torque changes by at the true joint state: the angle measured minus

@@ -9,19 +9,23 @@ rate and windowed exactly like the channel they act on.
   and smooth ones with the joint's own transition speed v_t in TRANSITION_SPEEDS (a
   friction that passes through zero at rest over 1 / phi2, the published sigmoid's);
 - a fall from standstill: sign(dq_j) exp(-(dq_j / v_s)^2) for v_s in STRIBECK_SPEEDS;
-- a drift in time: linear, or saturating 1 - exp(-t / tau).
+- a drift in time: linear, or saturating 1 - exp(-t / tau);
+- a misread angle (:func:`misread_library`): one joint's reading off in proportion to its
+  angle from the encoder zero, carried through the nominal model to every channel.
 
 A selected group's speed or time constant is then refined between the grid's neighbours
 (:func:`serpar.diagnosis.empirical.tune`), within bounds the physics sets.
 
 Only the joint's own variables enter its channels: a torque acting in one joint's drive
 (ripple, friction) shows in that joint's channel; the nominal model already carries how the
-others move.
+others move. A misread angle is the exception, since the model itself moves every joint's
+gravity and inertia with it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,6 +33,9 @@ from numpy.typing import NDArray
 from serpar.diagnosis.arm_dynamics_library import STICK_VELOCITY
 from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.empirical import BasisGroup, RestBand, Tuning
+
+if TYPE_CHECKING:
+    from serpar.diagnosis.arm_dynamics_effects import EffectModels
 
 Vec = NDArray[np.float64]
 
@@ -142,4 +149,33 @@ def arm_library(t: Terms, channels: tuple[str, ...], blocks: tuple[str, ...],
                               window((time / span)[:, None]), s))
             out += [_tuned("tau_s", DRIFT_BOUNDS[0] * span, DRIFT_BOUNDS[1] * span, drift,
                            tau * span) for tau in DRIFT_TAUS]
+    return out
+
+
+def misread_library(models: EffectModels, t: Terms, blocks: tuple[str, ...]) -> list[BasisGroup]:
+    """Per joint j: its reading off by s x q_j (an encoder scale, a gear or belt ratio wrong
+    between reading and link), one coefficient s. The model computes every joint's torque at
+    the read angles, rates and accelerations, so the group spans all channels: its column is
+    the model's change per unit s, whitened, in the family's row-major (row, channel) order.
+    The encoder-offset candidate carries a constant misreading: the group is screened by what
+    it adds beside one (``beside``), as the model refitted with it moves that back."""
+    sigma = {"link": t.sigma_link, "drive": t.sigma_drive}
+
+    def whitened(j: int, proportional: bool) -> Vec:
+        x = np.stack([models.misread_sensitivity(j, block == "link", proportional) / sigma[block]
+                      for block in blocks], axis=1)  # rows x blocks x n
+        return x.reshape(len(x), -1)
+
+    out: list[BasisGroup] = []
+    for j in range(t.n):
+        scale = whitened(j, True)
+        if not np.any(scale):
+            continue  # a reading the model's torque does not depend on
+        offset = whitened(j, False)
+        angle = t.q[:, j]
+        out.append(BasisGroup(
+            f"q{j + 1}", f"q{j + 1}", "proportional", f"q{j + 1} x (1 + s)", "rad",
+            columns=lambda rows, w=scale: w[np.asarray(rows, np.int64)].reshape(-1, 1),
+            physical=lambda rows, a=angle: a[np.asarray(rows, np.int64), None],
+            beside=lambda rows, w=offset: w[np.asarray(rows, np.int64)].reshape(-1, 1)))
     return out

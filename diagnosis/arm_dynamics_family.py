@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_config import ArmDynamicsConfig, Span
 from serpar.diagnosis.arm_dynamics_effects import ADDS_INERTIA, EffectModels
-from serpar.diagnosis.arm_dynamics_empirical import arm_library
+from serpar.diagnosis.arm_dynamics_empirical import arm_library, misread_library
 from serpar.diagnosis.arm_dynamics_grouping import hold_grouped
 from serpar.diagnosis.arm_dynamics_inertial import LinkInertial
 from serpar.diagnosis.arm_dynamics_jacobian import residual_jacobian, tare_columns
@@ -201,8 +201,10 @@ class ArmDynamicsFamily:
                         "time [s]", np.hstack([measured[b] for b in self._blocks]).ravel())
 
     def empirical_library(self) -> list[BasisGroup]:
-        """Shapes in each joint's angle, velocity and time (diagnosis/arm_dynamics_empirical.py)."""
-        return arm_library(self.terms, self.channels, self._blocks, self.cfg.stick_velocity)
+        """Shapes in each joint's angle, velocity and time, and each joint's angle misread
+        (diagnosis/arm_dynamics_empirical.py)."""
+        return (arm_library(self.terms, self.channels, self._blocks, self.cfg.stick_velocity)
+                + misread_library(self._models, self.terms, self._blocks))
 
     def split(self, rng: np.random.Generator) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         if self.cfg.train_span is not None and self.cfg.heldout_span is not None:

@@ -114,7 +114,8 @@ def _screen(groups: list[BasisGroup], rows: Rows, r: Vec, cache: dict[tuple[int,
     explains. A channel-local group: its projection (groups on different channels are
     orthogonal). Groups over the whole residual that share a label (one leg each, say) can be
     strongly correlated, and a signal of two of them may project best onto a third: each is
-    scored by what it adds to the others of its label, fitted together."""
+    scored by what it adds to the others of its label and to what the model may hold of them
+    (``beside``), fitted together."""
     out = []
     dense: dict[str, list[int]] = {}
     for i, g in enumerate(groups):
@@ -125,18 +126,28 @@ def _screen(groups: list[BasisGroup], rows: Rows, r: Vec, cache: dict[tuple[int,
     y = r.ravel()
     for members in dense.values():
         xs = [columns_at(groups[i], rows, cache) for i in members]
-        x = np.hstack(xs)
-        gram_inv = np.linalg.pinv(x.T @ x)
-        coef = gram_inv @ (x.T @ y)
-        edges = np.cumsum([0] + [b.shape[1] for b in xs])
-        for m, i in enumerate(members):
-            sl = slice(edges[m], edges[m + 1])
-            c = coef[sl]
-            # the chi-square the others cannot make up without this group
-            out.append((float(c @ np.linalg.pinv(gram_inv[sl, sl]) @ c), i))
+        besides = [np.asarray(b(rows), float).reshape(len(y), -1)
+                   for b in (groups[i].beside for i in members) if b is not None]
+        alone = _added(xs, [], y)
+        # beside what the model may hold of them: where it holds it, what they add is that
+        # part; where it does not, they add the whole, as alone
+        scores = np.maximum(alone, _added(xs, besides, y)) if besides else alone
+        out += [(float(score), i) for score, i in zip(scores, members)]
     return out
 
 
+def _added(xs: list[Vec], besides: list[Vec], y: Vec) -> Vec:
+    """Per group of columns ``xs``: the chi-square of ``y`` that the others and ``besides``,
+    fitted together with it, cannot make up without it."""
+    x = np.hstack(xs + besides)
+    gram_inv = np.linalg.pinv(x.T @ x)
+    coef = gram_inv @ (x.T @ y)
+    edges = np.cumsum([0] + [b.shape[1] for b in xs])
+    out = np.empty(len(xs))
+    for m in range(len(xs)):
+        sl = slice(edges[m], edges[m + 1])
+        out[m] = float(coef[sl] @ np.linalg.pinv(gram_inv[sl, sl]) @ coef[sl])
+    return out
 
 
 def fixed_refit(groups: list[BasisGroup], r_train: Vec, r_held: Vec, train: Rows, held: Rows,

@@ -75,6 +75,10 @@ class BasisGroup:
     rest: RestBand | None = None
     """Where it is a friction against motion: how it holds the joint at rest (None: not a
     friction)."""
+    beside: Callable[[Rows], Vec] | None = None
+    """Whitened columns, laid out like ``columns``, of what a library candidate may already
+    hold of it (a misread angle's constant part: an encoder offset). Screening scores the
+    group by what it adds beside them, since the model refitted with it moves those back."""
 
     @property
     def width(self) -> int:

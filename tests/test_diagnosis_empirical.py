@@ -205,6 +205,27 @@ def test_a_sigmoid_friction_withheld_is_characterised_on_its_joint_velocity() ->
     assert emp.heldout_rms_after < 0.5 * emp.heldout_rms_before
 
 
+@pytest.mark.slow
+def test_an_encoder_scale_withheld_is_characterised_as_its_own_angle_misread() -> None:
+    """Joint 2's encoder reads q2 (1 - 0.0144) (the seed-0 twin), its candidate withheld: the
+    model puts every joint's gravity at the misread angle, so no channel's own shapes explain
+    it; the empirical term's first group is q2 misread in proportion to q2, with the scale
+    recovered, and brings the held-out residual to the noise."""
+    rec, answer = make_twin("encoder_scale", None, 0)
+    family = family_from_recording(rec)
+    family.effects = tuple(e for e in family.effects if e.name != "encoder_scale")
+    d = diagnose(family, seed=0)
+    emp = d.empirical
+    assert emp is not None and emp.terms, d.verdict
+    first = emp.terms[0]
+    assert (first.group.channel, first.group.variable, first.group.shape) == (
+        "q2", "q2", "proportional"), d.verdict
+    assert first.group.channel in answer["signature"]["channels"]
+    truth = answer["params"]["scale2"]
+    assert abs(first.coefficients[0] - truth) < 0.05 * abs(truth), emp.words()
+    assert emp.heldout_rms_before > 5 and emp.heldout_rms_after < 1.2, emp.words()
+
+
 GAZ_PANDA = ((0.54615, 0.87224, 0.64068, 1.2794, 0.83904, 0.30301, 0.56489),
              (5.1181, 9.0657, 10.136, 5.5903, 8.3469, 17.133, 10.336),
              (0.039533, 0.025882, -0.04607, 0.036194, 0.026226, -0.021047, 0.0035526))

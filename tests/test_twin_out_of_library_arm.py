@@ -71,7 +71,7 @@ def test_answer_carries_signature_and_params(effect: str) -> None:
     _, answer = twin(effect)
     sig = answer["signature"]
     assert set(sig) >= {"channels", "variables", "words"} and sig["words"]
-    assert sig["channels"] and set(sig["channels"]) <= set(ch.TAU_J + ch.TAU_J_D)
+    assert sig["channels"] and set(sig["channels"]) <= set(ch.TAU_J + ch.TAU_J_D + ch.Q)
     assert sig["variables"] and set(sig["variables"]) <= set(ch.Q + ch.DQ)
     assert answer["params"] and answer["saturated_samples"] == 0
     lo, hi = MAGNITUDE_RANGE[effect]
@@ -151,8 +151,12 @@ def test_encoder_scale_moves_the_link_torque_by_the_model_at_the_true_motion() -
 
     predicted = model_at_true_motion(rec, scale) - model_at_true_motion(ref, 0 * scale)
     seen = (columns(rec, ch.TAU_J) - columns(ref, ch.TAU_J))[20:-20:10]
-    c = int(answer["signature"]["channels"][0].removeprefix("tau_J")) - 1
-    assert answer["signature"]["channels"][1] == f"tau_J_d{c + 1}"
+    # the misread encoders' own channels first, largest scale first, then the torques
+    misread = [f"q{i + 1}" for i in np.argsort(-np.abs(scale)) if scale[i]]
+    channels = answer["signature"]["channels"]
+    assert channels[:len(misread)] == misread
+    c = int(channels[len(misread)].removeprefix("tau_J")) - 1
+    assert channels[len(misread) + 1] == f"tau_J_d{c + 1}"
     assert np.std(predicted[:, c]) >= 0.8 * np.max(np.std(predicted, axis=0))
     for i in np.flatnonzero(np.std(predicted, axis=0) > 0.1 * np.std(predicted[:, c])):
         assert np.corrcoef(predicted[:, i], seen[:, i])[0, 1] > 0.95, i

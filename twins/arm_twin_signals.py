@@ -173,9 +173,11 @@ def encoder_scale(mag: float, rng: np.random.Generator, scale: ArmScale
 
 def scale_signature(reality: Reality, run: TwinRun, rate: float,
                     scale: ArmScale) -> dict[str, object]:
-    """Where the scale error shows: the channel whose link torque it moves most, the nominal
-    model at the true motion against the model at the read one (std about the mean: the
-    diagnosis tares each sensor's constant). Gravity carries most of it, inertia the rest."""
+    """Where the scale error shows: the misread encoders' own channels (q_j, carried through
+    the model to every torque), and the torque channels it moves by at least half the most,
+    the nominal model at the true motion against the model at the read one (std about the
+    mean: the diagnosis tares each sensor's constant). Gravity carries most of it, inertia
+    the rest."""
     dyn = ArmDynamics(arm=scale.arm)
     q = run.q_true
     dq = np.gradient(q, axis=0) * rate  # the true motion is noise-free: plain differences
@@ -191,7 +193,8 @@ def scale_signature(reality: Reality, run: TwinRun, rate: float,
     scaled = [int(i) for i in np.argsort(-np.abs(reality.encoder_scale))
               if reality.encoder_scale[i]]
     j = scaled[0] + 1
-    return {"channels": [name for i in seen for name in (f"tau_J{i}", f"tau_J_d{i}")],
+    return {"channels": [f"q{i + 1}" for i in scaled]
+                        + [name for i in seen for name in (f"tau_J{i}", f"tau_J_d{i}")],
             "variables": [f"q{i + 1}" for i in scaled],
             "torque_shift_std": [float(v) for v in shift],
             "words": f"encoder {j} reads q{j} (1 {reality.encoder_scale[j - 1]:+.4f}) about its "
