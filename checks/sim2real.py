@@ -106,14 +106,18 @@ def _episode(folder: Path, seed: int) -> RealEpisode:
 
 def rerun(episodes: list[RealEpisode], out: Path, plant_model: str | None,
           contact_friction: float | None, tick: Tick) -> list[Path]:
-    """Record the simulator on each episode's seed and holes into ``out``."""
+    """Record the simulator on each episode's seed and holes into ``out`` (a recording a
+    Ctrl-C stops is left as far as it got, the finished ones whole)."""
     folders = []
-    for ep in episodes:
+    for k, ep in enumerate(episodes):
         cfg = dataclasses.replace(ep.config, plant_model=plant_model,
                                   contact_friction=contact_friction)
         folder = recording_folder(out, cfg.seed)
+        what = f"{out.name} rerun {k + 1} of {len(episodes)}"
+        holes = cfg.holes if isinstance(cfg.holes, int) else len(cfg.holes)
+        tick(f"{what}: seed {cfg.seed}, {holes} holes")
         run_episode(cfg, calibrated_pairs(cfg.camera_width), recording=folder,
-                    on_record=lambda r: tick(f"{out.name}: hole {r.hole} {r.outcome}"))
+                    on_record=lambda r, what=what: tick(f"{what}: hole {r.hole} {r.outcome}"))
         folders.append(folder)
     return folders
 
@@ -141,8 +145,8 @@ def outcomes_of(folders: list[Path]) -> list[HoleOutcome]:
     return out
 
 
-def diagnose_cell(episodes: list[RealEpisode], nominal: EpisodeConfig, source: str, seed: int
-                  ) -> tuple[Diagnosis, dict[str, object], list[str]]:
+def diagnose_cell(episodes: list[RealEpisode], nominal: EpisodeConfig, source: str, seed: int,
+                  report: Tick | None = None) -> tuple[Diagnosis, dict[str, object], list[str]]:
     """Diagnose the longest recording against the simulator ``nominal`` builds; the combined
     model (the simulator's effects updated by what the recording shows) and notes."""
     longest = max(episodes, key=lambda e: len(e.config.holes))  # type: ignore[arg-type]
@@ -150,7 +154,7 @@ def diagnose_cell(episodes: list[RealEpisode], nominal: EpisodeConfig, source: s
              for e in episodes if e is not longest]
     family = PriorFamily(family_from_recording(load_for_diagnosis(longest.folder)),
                          model_from_config(nominal, source))
-    diag = diagnose(family, seed)
+    diag = diagnose(family, seed, report=report)
     diag = dataclasses.replace(diag, model=family.combined_model(diag.model))
     return diag, diag.model_file(str(longest.folder)), notes
 

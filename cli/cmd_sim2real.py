@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
 from pathlib import Path
 
 from serpar.checks.sim2real import (
@@ -23,7 +22,7 @@ from serpar.checks.sim2real_report import write_sim2real_report
 from serpar.cli import arg_types
 from serpar.cli.cmd_export_mjcf import export_summary
 from serpar.cli.out_paths import add_force, out_file, out_folder
-from serpar.cli.output import print_json, table
+from serpar.cli.output import StageLines, print_json, table
 from serpar.diagnosis.task_outcomes import OUTCOMES, RESOLUTION
 from serpar.errors import ConfigError
 from serpar.sim.mjcf_export import is_mjcf_path, read_any_model
@@ -53,16 +52,39 @@ def _beyond(name: str, d: OutcomeDiff) -> bool:
             and abs(d.diff) > max(d.ci, RESOLUTION.get(name, 0.0)) + 1e-12)
 
 
-def verdict(before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff]) -> str:
+def further(before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff]) -> list[str]:
+    """Outcomes the update moved further from the cell, beyond what they are measured to, with
+    their differences before -> after."""
+    out = []
+    for n in OUTCOMES:
+        b, a = before[n].diff, after[n].diff
+        if b is None or a is None or abs(a) <= abs(b) + RESOLUTION.get(n, 0.0):
+            continue
+        where = ("no CI from one hole" if after[n].ci is None
+                 else "now beyond its CI" if _beyond(n, after[n]) else "within its CI")
+        out.append(f"{n} ({b:+.4g} -> {a:+.4g} {OUTCOMES[n]}, {where})")
+    return out
+
+
+def verdict(before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff],
+            found: list[str] | None = None) -> str:
+    """What the update did to the outcomes beyond their CIs, and every outcome it moved further
+    from the cell, named with the effects the update added (``found``)."""
     missed = [n for n in OUTCOMES if _beyond(n, before[n])]
+    away = further(before, after)
+    worse = ("; further from the cell after the update: " + ", ".join(away)
+             + f" (the update carries {', '.join(found or []) or 'no established effect'}: an "
+               "effect the cell does not have, or one its value does not fit, or physics the "
+               "update lacks, moves it)") if away else ""
     if not missed:
-        return "the nominal simulator's outcomes agree with the real cell's within their CIs"
+        return ("the nominal simulator's outcomes agree with the real cell's within their CIs"
+                + worse)
     fixed = [n for n in missed if after[n].diff is not None
              and abs(after[n].diff) < abs(before[n].diff) and not _beyond(n, after[n])]  # type: ignore[arg-type]
     still = [n for n in missed if n not in fixed]
     return (f"beyond the CI with the nominal simulator: {', '.join(missed)}; after the update "
             f"smaller and within the CI: {', '.join(fixed) or 'none'}"
-            + (f"; not: {', '.join(still)}" if still else ""))
+            + (f"; not: {', '.join(still)}" if still else "") + worse)
 
 
 def cmd_sim2real(args: argparse.Namespace) -> int:
@@ -82,27 +104,36 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     folder = out_folder(out, "--out", args.force, ("updated.model.json", "updated.xml"))
     folder.clear()
     out.mkdir(parents=True, exist_ok=True)
-    quiet = args.json
-
-    def tick(msg: str) -> None:
-        if not quiet:
-            print(msg, file=sys.stderr)
-
-    notes = [n for e in episodes for n in e.notes]
-    real_outcomes = outcomes_of([e.folder for e in episodes])
-    tick(f"{len(real_outcomes)} holes in {len(episodes)} recording(s); the simulator on the same holes")
-    before = compare(real_outcomes, outcomes_of(rerun(episodes, out / "nominal", start_model, None, tick)))
-    tick("diagnosing the real recordings against it")
-    nominal = dataclasses.replace(episodes[0].config, plant_model=start_model)
-    diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell", args.seed)
-    notes += more
-    model_path, exported = write_updated(model, out)
-    contact = updated_contact_friction(model)
-    tick(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
-         "updated simulator on the same holes")
-    after = compare(real_outcomes, outcomes_of(rerun(episodes, out / "updated", str(model_path), contact, tick)))
+    step = StageLines("sim2real")  # one line per stage on stderr, always (with --json too)
+    try:
+        notes = [n for e in episodes for n in e.notes]
+        real_outcomes = outcomes_of([e.folder for e in episodes])
+        step(f"{len(real_outcomes)} holes in {len(episodes)} recording(s); the nominal "
+             "simulator on the same holes")
+        before = compare(real_outcomes,
+                         outcomes_of(rerun(episodes, out / "nominal", start_model, None, step)))
+        step("diagnosing the real recordings against it")
+        nominal = dataclasses.replace(episodes[0].config, plant_model=start_model)
+        diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell",
+                                          args.seed, step)
+        notes += more
+        model_path, exported = write_updated(model, out)
+        contact = updated_contact_friction(model)
+        step(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
+             "updated simulator on the same holes")
+        after = compare(real_outcomes, outcomes_of(rerun(episodes, out / "updated",
+                                                         str(model_path), contact, step)))
+    except KeyboardInterrupt:  # Ctrl-C: the finished reruns stay in OUT; no verdict
+        stopped = {"real_dir": str(real), "out": str(out), **step.interrupted()}
+        if args.json:
+            print_json(stopped)
+        return 130
+    except BaseException:
+        step.close("failed")
+        raise
+    step.close()
     found = established(diag, model)
-    words = verdict(before, after)
+    words = verdict(before, after, [str(f["effect"]) for f in found])
     if report is not None:
         write_sim2real_report(report, str(real), before, after, found, notes, words)
     if args.json:
@@ -111,7 +142,8 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                                      "after": after[n].as_dict()} for n in OUTCOMES},
                     "established": found, "diagnosis_verdict": diag.verdict,
                     "updated_model": str(model_path), "mjcf": export_summary(exported),
-                    "contact_friction": contact, "verdict": words, "notes": notes,
+                    "contact_friction": contact, "further_after_update": further(before, after),
+                    "verdict": words, "notes": notes,
                     "report": None if report is None else str(report)})
         return 0
     for n in notes:

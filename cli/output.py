@@ -87,6 +87,8 @@ class StageLines:
         self.prefix, self.every_s = prefix, every_s
         self.t0 = time.perf_counter()
         self.last, self.current = self.t0, "starting"
+        self.finished: list[str] = []
+        """The stages before the current one, in order (what an interrupted run did)."""
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._beat = threading.Thread(target=self._heartbeat, daemon=True)
@@ -100,6 +102,8 @@ class StageLines:
             self.last = now
 
     def __call__(self, text: str) -> None:
+        if self.current != "starting":
+            self.finished.append(self.current)
         self.current = text
         self._write(text)
 
@@ -108,6 +112,13 @@ class StageLines:
             if time.perf_counter() - self.last >= self.every_s:
                 self._write(f"still: {self.current}")
 
-    def close(self) -> None:
+    def close(self, word: str = "done") -> None:
         self._stop.set()
-        self._write("done")
+        self._write(word)
+
+    def interrupted(self) -> dict[str, object]:
+        """Stop on Ctrl-C: a last line, and what the summary object says of the run (the
+        stages it finished, the one it was in; no verdict)."""
+        self.close(f"interrupted in: {self.current}")
+        return {"interrupted": True, "finished": list(self.finished),
+                "interrupted_at": self.current, "elapsed_s": time.perf_counter() - self.t0}

@@ -52,6 +52,30 @@ def test_diagnose_withholds_a_candidate(tmp_path, capsys) -> None:
     assert "candidates withheld (--withhold): thermal_drift" in result["notes"]
 
 
+def test_a_diagnosis_stopped_by_ctrl_c_says_where_and_gives_no_verdict(tmp_path, capsys,
+                                                                      monkeypatch) -> None:
+    """Ctrl-C during the candidates: exit 130; the summary object lists the stages finished
+    and the one it was in, and holds no verdict; stderr's last line says where it stopped."""
+    out = tmp_path / "twin"
+    assert main(["twin", "--effect", "thermal_drift", "--seed", "2", "--out", str(out)]) == 0
+    capsys.readouterr()
+    import serpar.cli.cmd_diagnose as cmd
+
+    def stopped(family, seed, report):
+        report("baseline")
+        report("candidate thermal_drift")
+        raise KeyboardInterrupt
+    monkeypatch.setattr(cmd, "diagnose", stopped)
+    assert main(["diagnose", str(out), "--json"]) == 130
+    captured = capsys.readouterr()
+    result = json.loads(captured.out)
+    assert result["interrupted"] is True and "verdict" not in result
+    assert result["finished"] == ["baseline"]
+    assert result["interrupted_at"] == "candidate thermal_drift"
+    last = captured.err.splitlines()[-1]
+    assert last.startswith("diagnose [") and last.endswith("interrupted in: candidate thermal_drift")
+
+
 def test_twin_bad_effect_lists_choices(tmp_path, capsys) -> None:
     assert main(["twin", "--effect", "gremlins", "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err

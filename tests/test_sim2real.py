@@ -36,6 +36,27 @@ def test_paired_difference_and_its_t_interval() -> None:
     assert compare(_holes([1.0]), _holes([1.0], "jam"))["seated"].diff == 0.0
 
 
+def test_the_verdict_names_every_outcome_the_update_moved_further_from_the_cell() -> None:
+    """An update that brings one outcome inside its CI and pushes another further away says
+    both, the second with its figures and the effects the update carried."""
+    from serpar.checks.sim2real import OutcomeDiff
+    from serpar.cli.cmd_sim2real import further, verdict
+
+    def diffs(**given: tuple[float, float]) -> dict[str, OutcomeDiff]:
+        out = {n: OutcomeDiff(0.0, 0.01, 12, ()) for n in OUTCOMES}
+        out.update({n: OutcomeDiff(d, ci, 12, ()) for n, (d, ci) in given.items()})
+        return out
+    before = diffs(seated_depth=(-0.070, 0.02), peak_axial_force=(0.40, 0.1))
+    after = diffs(seated_depth=(-0.122, 0.02), peak_axial_force=(0.02, 0.1))
+    assert further(before, after) == ["seated_depth (-0.07 -> -0.122 mm, now beyond its CI)"]
+    words = verdict(before, after, ["payload", "link_inertia"])
+    assert "within the CI: peak_axial_force" in words and "not: seated_depth" in words
+    assert "further from the cell after the update: seated_depth (-0.07 -> -0.122 mm" in words
+    assert "carries payload, link_inertia" in words
+    # a move within the outcome's resolution is no move; nothing moved, nothing said
+    assert further(before, before) == [] and "further" not in verdict(before, before)
+
+
 def _meta(folder: Path, model: dict, holes: list) -> Path:
     folder.mkdir(parents=True)
     (folder / "meta.json").write_text(json.dumps({"model": model, "holes": holes}))
@@ -124,3 +145,29 @@ def test_the_concealed_latency_is_found_within_2_sigma(latency_cell) -> None:
     (found,) = out["established"]
     value, sigma = found["params"]["delay"]
     assert abs(value - truth) <= 2 * sigma
+
+
+@pytest.mark.slow
+def test_sim2real_stopped_by_ctrl_c_keeps_its_finished_reruns(latency_cell, tmp_path, capsys,
+                                                              monkeypatch) -> None:
+    """Progress on stderr with --json too (a line per rerun hole, with the elapsed time); Ctrl-C
+    during the diagnosis: exit 130, the nominal rerun kept in OUT, the summary object lists
+    the finished stages and where it stopped, and holds no verdict."""
+    import serpar.cli.cmd_sim2real as cmd
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(cmd, "diagnose_cell", stopped)
+    cell, out = latency_cell[0], tmp_path / "s2r"
+    capsys.readouterr()
+    assert main(["sim2real", str(cell), "--out", str(out), "--json"]) == 130
+    captured = capsys.readouterr()
+    result = json.loads(captured.out)
+    assert result["interrupted"] is True and "verdict" not in result
+    assert result["interrupted_at"] == "diagnosing the real recordings against it"
+    assert any(s.startswith("nominal rerun 1 of 1: hole") for s in result["finished"])
+    lines = captured.err.splitlines()
+    assert all(line.startswith("sim2real [") for line in lines), captured.err
+    assert any("nominal rerun 1 of 1: hole" in line for line in lines)
+    assert lines[-1].endswith("interrupted in: diagnosing the real recordings against it")
+    assert (out / "nominal").is_dir() and not (out / "updated").exists()

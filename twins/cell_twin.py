@@ -8,7 +8,7 @@ with; both sit beside the recording, never in it.
 
 | effect | drawn | in the cell | answer (diagnose's names) |
 |---|---|---|---|
-| joint_friction | 1.5-3x a real Panda's, the published form (Gaz et al. 2019: sigmoid with offset) | the runtime's drive torque (sim/plants/drive_friction.py), replacing the nominal 0.3x dry friction | Fc<j>: the sigmoid's level at speed, Fv<j>: 0; its offset and its passage through zero are outside that form (``outside_form``) |
+| joint_friction | 1.5-3x a real Panda's, the published form (Gaz et al. 2019: sigmoid with offset) | the runtime's drive torque (sim/plants/drive_friction.py), replacing the nominal 0.3x dry friction | Fc<j>: the sigmoid's level at speed, Fv<j>: 0; its offset and its passage through zero are outside that form (``outside_form``); the same friction in ``sigmoid_friction``'s names under ``also``: phi1_j, phi2_j, phi3_j |
 | sensor_timing | the torque sensors read 0.5-2 ms late | MuJoCo sensor ``delay`` | lag [s] |
 | latency | commands act 0.5-2 ms late | MuJoCo actuator ``delay`` | delay [s] |
 | payload | 0.05-0.3 kg more hand than the nominal one (a camera, an adapter) | a body on the flange | mass, com_x/y/z |
@@ -83,6 +83,15 @@ def _payload(rng: np.random.Generator) -> dict[str, float]:
             "Lxx": side, "Lyx": 0.0, "Lyy": side, "Lzx": 0.0, "Lzy": 0.0, "Lzz": side}
 
 
+def sigmoid_params(scale: float) -> dict[str, float]:
+    """The cell's drive friction at ``scale`` x a real Panda's in ``sigmoid_friction``'s names:
+    phi1_j the swing (scaled), phi2_j, phi3_j Gaz et al.'s own."""
+    phi1, phi2, phi3 = GAZ_FRICTION_PHI
+    return {**{f"phi1_{j + 1}": scale * v for j, v in enumerate(phi1)},
+            **{f"phi2_{j + 1}": float(v) for j, v in enumerate(phi2)},
+            **{f"phi3_{j + 1}": float(v) for j, v in enumerate(phi3)}}
+
+
 def concealed_cell(effect: str, seed: int, holes: int
                    ) -> tuple[dict[str, object], dict[str, object], dict[str, object] | None]:
     """The concealed cell: its changes to the nominal episode config, its answer, and its arm
@@ -105,7 +114,10 @@ def concealed_cell(effect: str, seed: int, holes: int
                 "scale_of_a_real_panda": scale,
                 "outside_form": {"form": "Gaz et al. 2019 sigmoid with offset",
                                  "offset_nm": [float(v) for v in offset],
-                                 "transition_rad_s": [1.0 / p for p in GAZ_FRICTION_PHI[1]]}})
+                                 "transition_rad_s": [1.0 / p for p in GAZ_FRICTION_PHI[1]]},
+                "also": {"effect": "sigmoid_friction", "params": sigmoid_params(scale),
+                         "replaces": "the nominal cell's dry friction (arm_friction "
+                                     f"{NOMINAL.arm_friction} x a Panda's Coulomb level)"}})
         elif name in ("sensor_timing", "latency"):
             value = float(rng.uniform(*RANGES[name]))
             params = {"lag" if name == "sensor_timing" else "delay": value}
