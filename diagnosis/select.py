@@ -111,10 +111,10 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
         step += 1
         current = path[-1]
         best: tuple[Fit, dict[str, Effect], float] | None = None
-        for effect in family.effects:
-            if effect.name in current.active:
-                continue
-            say(effect.name)
+        tried = [e for e in family.effects if e.name not in current.active]
+        held = ", ".join(current.active) or "nothing yet"
+        for k, effect in enumerate(tried):
+            say(f"step {step} (holding {held}): candidate {k + 1} of {len(tried)}, {effect.name}")
             try:
                 new, new_fixed = fit_identified(family, current.active + (effect.name,), train,
                                                 heldout, current.params, fixed)
@@ -171,7 +171,7 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
         report(f"resampling {len(splits)} folds")
     # the model (and the file written from it) holds the established effects only
     kept, assessed, fixed = assess(family, final, {n: s[1] for n, s in effect_shares.items()}, splits,
-                                   train, heldout, fixed)
+                                   train, heldout, fixed, report)
     demoted: dict[str, tuple[str, ...]] = {}
     every = np.concatenate([train, heldout])
     before = family.residual(base.params, heldout)

@@ -23,7 +23,7 @@ Everything else the selection kept is "suspected, not established", with the rea
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -139,7 +139,8 @@ def fit_identified(family: Family, active: tuple[str, ...], train: Rows, heldout
 
 
 def resample(family: Family, final: Fit, splits: list[tuple[Rows, Rows]],
-             overrides: Mapping[str, Effect] | None = None) -> dict[str, Resampled]:
+             overrides: Mapping[str, Effect] | None = None,
+             report: Callable[[str], None] | None = None) -> dict[str, Resampled]:
     """Each effect of ``final`` on each split: fitted with the others, whether it still earns
     its parameters over the model refitted without it, and whether it predicts the same thing
     (its contribution to the residual over all rows, cosine >= MIN_AGREEMENT with the main
@@ -152,7 +153,9 @@ def resample(family: Family, final: Fit, splits: list[tuple[Rows, Rows]],
     tried = {n: 0 for n in names}
     values: dict[str, list[NDArray[np.float64]]] = {n: [] for n in names}
     agree: dict[str, list[float]] = {n: [] for n in names}
-    for train, held in splits:
+    for k, (train, held) in enumerate(splits):
+        if report:
+            report(f"fold {k + 1} of {len(splits)}: {', '.join(names)}, each with and without")
         full = fit_model(family, names, train, held, start, overrides)
         for n in names:
             values[n].append(np.asarray(full.params[n], float))
@@ -222,7 +225,7 @@ class Assessment:
 
 def assess(family: Family, final: Fit, share_of_remaining: Mapping[str, float],
            splits: list[tuple[Rows, Rows]], train: Rows, heldout: Rows,
-           overrides: Mapping[str, Effect]
+           overrides: Mapping[str, Effect], report: Callable[[str], None] | None = None
            ) -> tuple[Fit, dict[str, Assessment], dict[str, Effect]]:
     """Judge every effect of ``final``; drop the least needed one that does not hold up, refit
     the rest on the main split and judge them again in that model (an effect must neither ride
@@ -232,7 +235,7 @@ def assess(family: Family, final: Fit, share_of_remaining: Mapping[str, float],
     out: dict[str, Assessment] = {}
     fit, overrides = final, dict(overrides)
     while fit.active:
-        res = resample(family, fit, splits, overrides) if splits else {}
+        res = resample(family, fit, splits, overrides, report) if splits else {}
         failing = []
         for name in fit.active:
             effect = block_of(family, fit.active, name, overrides)
