@@ -115,7 +115,7 @@ def rerun(episodes: list[RealEpisode], out: Path, plant_model: str | None,
         folder = recording_folder(out, cfg.seed)
         what = f"{out.name} rerun {k + 1} of {len(episodes)}"
         holes = cfg.holes if isinstance(cfg.holes, int) else len(cfg.holes)
-        tick(f"{what}: seed {cfg.seed}, {holes} holes")
+        tick(f"{what}: seed {cfg.seed}, {holes} hole{'s' * (holes != 1)}")
         run_episode(cfg, calibrated_pairs(cfg.camera_width), recording=folder,
                     on_record=lambda r, what=what: tick(f"{what}: hole {r.hole} {r.outcome}"))
         folders.append(folder)

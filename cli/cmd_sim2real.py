@@ -108,7 +108,8 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     try:
         notes = [n for e in episodes for n in e.notes]
         real_outcomes = outcomes_of([e.folder for e in episodes])
-        step(f"{len(real_outcomes)} holes in {len(episodes)} recording(s); the nominal "
+        n = len(real_outcomes)
+        step(f"{n} hole{'s' * (n != 1)} in {len(episodes)} recording(s); the nominal "
              "simulator on the same holes")
         before = compare(real_outcomes,
                          outcomes_of(rerun(episodes, out / "nominal", start_model, None, step)))
