@@ -85,6 +85,8 @@ def print_diagnosis(diag, source: str) -> None:  # type: ignore[no-untyped-def]
         print("held-out RMS in physical units, before -> after: " + ", ".join(
             f"{r.channel} {r.before:.3g} -> {r.after:.3g} {r.unit}" for r in diag.physical.rms))
     print(f"verdict: {diag.verdict}")
+    if diag.not_identifiable:
+        print("not identifiable on these data: " + "; ".join(diag.not_identifiable))
 
 
 def plant_summary(model: dict) -> dict[str, list[str]] | None:  # type: ignore[type-arg]

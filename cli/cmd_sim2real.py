@@ -142,6 +142,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                     "outcomes": {n: {"unit": OUTCOMES[n], "before": before[n].as_dict(),
                                      "after": after[n].as_dict()} for n in OUTCOMES},
                     "established": found, "diagnosis_verdict": diag.verdict,
+                    "not_identifiable": list(diag.not_identifiable),
                     "updated_model": str(model_path), "mjcf": export_summary(exported),
                     "contact_friction": contact, "further_after_update": further(before, after),
                     "verdict": words, "notes": notes,
@@ -152,6 +153,8 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     print(table(["outcome", "unit", "holes", "nominal: real - sim", "updated: real - sim"],
                 [[n, OUTCOMES[n], before[n].n, before[n].words(), after[n].words()] for n in OUTCOMES]))
     print(f"diagnosis: {diag.verdict}")
+    if diag.not_identifiable:
+        print("not identifiable on these holes: " + "; ".join(diag.not_identifiable))
     print(f"verdict: {words}")
     print(f"updated model: {model_path}   MJCF: {exported.path}"
           + (f"   report: {report}" if report else ""))

@@ -87,13 +87,18 @@ class EpisodeFamily:
         self.inner, self.keep = inner, np.asarray(keep, np.int64)
         self.excluded = dict(excluded)
         self.slides = slides if slides is not None and slides.n >= MIN_SLIDES else None
+        found = slides.n if slides is not None else 0
+        self.not_identifiable: dict[str, str] = {} if self.slides else {
+            FRICTION.name: f"{found} chamfer slide{'s' * (found != 1)} in these insertions, "
+                           f"{MIN_SLIDES} needed (one to fit, one to hold out); the bore's "
+                           "friction is not read from the other phases"}
+        """Candidates these data cannot identify, with why (the verdict names them)."""
         self.baseline: Effect | None = inner.baseline
         self.effects: tuple[Effect, ...] = inner.effects + ((FRICTION,) if self.slides else ())
         self.max_effects = MAX_EFFECTS
         self.n_arm = len(self.keep)
         self.n_samples = self.n_arm + (self.slides.n if self.slides else 0)
         dropped = ", ".join(f"{n} in {p}" for p, n in self.excluded.items() if n)
-        found = slides.n if slides is not None else 0
         skipped = "; ".join(f"{n} {why}" for why, n in (slides.not_used if slides else {}).items())
         self.kind = (f"{KIND} (arm dynamics over {self.n_arm} free-motion windows; contact "
                      f"windows excluded: {dropped or 'none'}; {found} chamfer slide(s)"

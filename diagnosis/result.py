@@ -128,6 +128,9 @@ class Diagnosis:
     residual passed the noise test, looked like noise, or the family has no library)."""
     physical: PhysicalResidual | None = None
     """The held-out residual in physical units per channel (None: the family cannot say)."""
+    not_identifiable: tuple[str, ...] = ()
+    """Candidates the recording cannot identify at all, each with why (an episode with one
+    chamfer slide: the bore's friction)."""
 
     @property
     def established(self) -> tuple[Finding, ...]:
@@ -176,4 +179,4 @@ class Diagnosis:
                 "residual_check": None if self.residual is None else self.residual.as_dict(),
                 "empirical": None if self.empirical is None else self.empirical.as_dict(),
                 "heldout_rms_physical": None if self.physical is None else self.physical.as_dict(),
-                "model": self.model}
+                "not_identifiable": list(self.not_identifiable), "model": self.model}

@@ -252,7 +252,9 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
                **({"empirical": [t.as_dict() for t in empirical.terms]}
                   if empirical is not None and empirical.terms else {})},
         heldout_before=before, heldout_after=after, heldout_rows=heldout, residual=residual,
-        empirical=empirical, physical=in_units(family, heldout, before, after))
+        empirical=empirical, physical=in_units(family, heldout, before, after),
+        not_identifiable=tuple(f"{name} ({why})" for name, why in
+                               (getattr(family, "not_identifiable", None) or {}).items()))
 
 
 NOISE_EXPLAINED = 0.8

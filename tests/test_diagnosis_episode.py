@@ -7,6 +7,7 @@ phases, with the contact phases (grasp, insert, release) excluded and counted.""
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -62,8 +63,11 @@ def test_contact_phases_are_excluded_and_counted(episodes) -> None:
     rec, family, _ = episodes["friction"]
     keep, excluded = free_windows(rec, family.inner)
     assert len(keep) + sum(excluded.values()) == family.inner.n_samples  # nothing dropped silently
-    assert family.n_samples == len(keep)  # one chamfer slide: contact friction not a candidate
+    assert family.n_samples == len(keep)  # under two chamfer slides: contact friction not a candidate
     assert "contact_friction" not in {e.name for e in family.effects}
+    # and the diagnosis says so, with why
+    (why,) = episodes["friction"][2].not_identifiable
+    assert re.match(r"contact_friction \([01] chamfer slides? in these insertions, 2 needed", why), why
     assert excluded["grasp"] > 20 and excluded["insert"] > 10 and excluded["release"] > 0
     assert "insert" in family.kind and "grasp" in family.kind
     phase_rows = {r.label for r in family.locate(np.arange(family.n_samples),
@@ -199,6 +203,9 @@ def test_an_episode_without_the_wrench_estimate_still_diagnoses_the_arm(episodes
     family = family_from_recording(bare)
     assert family.slides is None and "no O_T_EE_z" in family.kind
     assert "contact_friction" not in {e.name for e in family.effects}
+    # and the diagnosis says so, with why
+    (why,) = episodes["friction"][2].not_identifiable
+    assert re.match(r"contact_friction \([01] chamfer slides? in these insertions, 2 needed", why), why
 
 
 def _without_the_command(rec):
