@@ -76,6 +76,9 @@ def verdict(before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff],
              + f" (the update carries {', '.join(found or []) or 'no established effect'}: an "
                "effect the cell does not have, or one its value does not fit, or physics the "
                "update lacks, moves it)") if away else ""
+    if all(before[n].ci is None for n in OUTCOMES):  # one hole: nothing to judge a difference by
+        return ("no outcome has a CI (one hole each; two or more give one): the differences "
+                "stand unjudged" + worse)
     if not missed:
         return ("the nominal simulator's outcomes agree with the real cell's within their CIs"
                 + worse)

@@ -55,6 +55,9 @@ def test_the_verdict_names_every_outcome_the_update_moved_further_from_the_cell(
     assert "carries payload, link_inertia" in words
     # a move within the outcome's resolution is no move; nothing moved, nothing said
     assert further(before, before) == [] and "further" not in verdict(before, before)
+    # one hole: no CI, so no claim of agreement
+    one = {n: OutcomeDiff(0.3, None, 1, ()) for n in OUTCOMES}
+    assert verdict(one, one).startswith("no outcome has a CI") and "agree" not in verdict(one, one)
 
 
 def _meta(folder: Path, model: dict, holes: list) -> Path:
