@@ -137,19 +137,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
         read = model_from_episode_config if is_config_path(args.model) else read_any_model
         family = prior = PriorFamily(family, read(args.model))
-    step = StageLines("diagnose")  # one line per stage on stderr, always
-    stopped: dict[str, object] | None = None
-    try:
-        diag = diagnose(family, args.seed, report=step)
-    except KeyboardInterrupt:  # Ctrl-C: where it stopped, no verdict
-        stopped = {"recording": str(args.recording), **step.interrupted()}
-    finally:
-        if stopped is None:
-            step.close()
-    if stopped is not None:
-        if args.json:
-            print_json(stopped)
-        return 130
+    with StageLines("diagnose") as step:  # one line per stage on stderr, always
+        try:
+            diag = diagnose(family, args.seed, report=step)
+        except KeyboardInterrupt:  # Ctrl-C: where it stopped, no verdict
+            return step.interrupted(args.json, recording=str(args.recording))
     if prior is not None:  # the written model: M's effects, corrected, plus the new ones
         diag = dataclasses.replace(diag, model=prior.combined_model(diag.model))
     plant = plant_summary({"source": str(args.recording), **diag.model})

@@ -107,35 +107,28 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     folder = out_folder(out, "--out", args.force, ("updated.model.json", "updated.xml"))
     folder.clear()
     out.mkdir(parents=True, exist_ok=True)
-    step = StageLines("sim2real")  # one line per stage on stderr, always (with --json too)
-    try:
-        notes = [n for e in episodes for n in e.notes]
-        real_outcomes = outcomes_of([e.folder for e in episodes])
-        n = len(real_outcomes)
-        step(f"{n} hole{'s' * (n != 1)} in {len(episodes)} recording(s); the nominal "
-             "simulator on the same holes")
-        before = compare(real_outcomes,
-                         outcomes_of(rerun(episodes, out / "nominal", start_model, None, step)))
-        step("diagnosing the real recordings against it")
-        nominal = dataclasses.replace(episodes[0].config, plant_model=start_model)
-        diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell",
-                                          args.seed, step)
-        notes += more
-        model_path, exported = write_updated(model, out)
-        contact = updated_contact_friction(model)
-        step(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
-             "updated simulator on the same holes")
-        after = compare(real_outcomes, outcomes_of(rerun(episodes, out / "updated",
-                                                         str(model_path), contact, step)))
-    except KeyboardInterrupt:  # Ctrl-C: the finished reruns stay in OUT; no verdict
-        stopped = {"real_dir": str(real), "out": str(out), **step.interrupted()}
-        if args.json:
-            print_json(stopped)
-        return 130
-    except BaseException:
-        step.close("failed")
-        raise
-    step.close()
+    with StageLines("sim2real") as step:  # one line per stage on stderr, always (--json too)
+        try:
+            notes = [n for e in episodes for n in e.notes]
+            real_outcomes = outcomes_of([e.folder for e in episodes])
+            n = len(real_outcomes)
+            step(f"{n} hole{'s' * (n != 1)} in {len(episodes)} recording(s); the nominal "
+                 "simulator on the same holes")
+            before = compare(real_outcomes,
+                             outcomes_of(rerun(episodes, out / "nominal", start_model, None, step)))
+            step("diagnosing the real recordings against it")
+            nominal = dataclasses.replace(episodes[0].config, plant_model=start_model)
+            diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell",
+                                              args.seed, step)
+            notes += more
+            model_path, exported = write_updated(model, out)
+            contact = updated_contact_friction(model)
+            step(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
+                 "updated simulator on the same holes")
+            after = compare(real_outcomes, outcomes_of(rerun(episodes, out / "updated",
+                                                             str(model_path), contact, step)))
+        except KeyboardInterrupt:  # Ctrl-C: the finished reruns stay in OUT; no verdict
+            return step.interrupted(args.json, real_dir=str(real), out=str(out))
     found = established(diag, model)
     words = verdict(before, after, [str(f["effect"]) for f in found])
     if report is not None:

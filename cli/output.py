@@ -8,7 +8,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterable, Iterator, Sequence
-from typing import Any
+from typing import Any, Self
 
 from serpar.sim.strict_json import dumps
 
@@ -113,12 +113,23 @@ class StageLines:
                 self._write(f"still: {self.current}")
 
     def close(self, word: str = "done") -> None:
+        if self._stop.is_set():
+            return  # closed already (interrupted)
         self._stop.set()
         self._write(word)
 
-    def interrupted(self) -> dict[str, object]:
-        """Stop on Ctrl-C: a last line, and what the summary object says of the run (the
-        stages it finished, the one it was in; no verdict)."""
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, *_: object) -> None:
+        self.close("done" if kind is None else "failed")
+
+    def interrupted(self, as_json: bool, **about: object) -> int:
+        """Stop on Ctrl-C: a last line on stderr; with ``as_json`` the summary object on stdout
+        (``about``, the stages finished and the one it was in; no verdict). The exit status."""
         self.close(f"interrupted in: {self.current}")
-        return {"interrupted": True, "finished": list(self.finished),
-                "interrupted_at": self.current, "elapsed_s": time.perf_counter() - self.t0}
+        if as_json:
+            print_json({**about, "interrupted": True, "finished": list(self.finished),
+                        "interrupted_at": self.current,
+                        "elapsed_s": time.perf_counter() - self.t0})
+        return 130
