@@ -138,7 +138,8 @@ class CellRuntime:
         """A recompiled scene: the drive, the gate and the step size start over on the new
         model."""
         if self.drive is not None:
-            self.drive = DriveFriction.of_arm(scene.model, names.ARM, self.drive.scale)
+            self.drive = DriveFriction.of_arm(scene.model, names.ARM, self.drive.law,
+                                              scene.config.physics.longest_step)
         self._adcs.clear()  # the next ones read the sensors' delays from the new model
         if self.gate is not None:
             self.gate.bind(scene.model, scene.data)

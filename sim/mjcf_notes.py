@@ -79,6 +79,15 @@ def header(lines: Sequence[str]) -> str:
     return "<!--\n" + _safe("\n".join(lines)) + "\n-->\n"
 
 
+NO_MJCF_FORM: dict[str, str] = {
+    "stribeck_friction": "MuJoCo's frictionloss is one dry level (the Coulomb part, from "
+                         "joint_friction): a fall with speed has no MJCF form",
+    "sigmoid_friction": "MuJoCo's frictionloss is one dry level, symmetric about zero speed: a "
+                        "sigmoid with an offset has no MJCF form",
+}
+"""Drive friction an MJCF cannot hold (the model text carries it)."""
+
+
 def not_expressed_lines(items: Sequence[str]) -> list[str]:
     if not items:
         return ["Everything established is expressed below."]

@@ -27,7 +27,7 @@ from serpar.sim.mjcf_bindings import (
     friction_bindings,
     payload_record,
 )
-from serpar.sim.mjcf_notes import Where, effect_notes, not_expressed_lines
+from serpar.sim.mjcf_notes import NO_MJCF_FORM, Where, effect_notes, not_expressed_lines
 from serpar.sim.mjcf_writer import MjcfExport, write_export
 from serpar.sim.model_file import DiagnosisModel, model_dict
 from serpar.sim.physics import PhysicsConfig
@@ -40,6 +40,9 @@ from serpar.sim.plants.arm_changes import (
 from serpar.sim.plants.from_model_file import APPLY, KNOWN_EFFECTS, arm_plant_changes
 
 BUILT_IN = "built-in"
+DRIVE_TORQUE = {e: f"{why}; serpar's cell applies it as a drive torque before every step "
+                   "(sim/plants/drive_friction.py)" for e, why in NO_MJCF_FORM.items()}
+"""The cell's drive-friction effects, which the plant takes and an MJCF cannot express."""
 MODEL_NAME = "serpar_panda_diagnosed"
 
 
@@ -63,6 +66,8 @@ def panda_record(model: DiagnosisModel, m: mujoco.MjModel) -> ExportRecord:
     out: list[Binding] = friction_bindings(model, m, JOINT_NAMES, damping)
     out += [bind(m, "link_inertia", f"link{j}", ("body", f"link{j}", "mass"),
                  nominal.body(f"link{j}").mass, "scale") for j in range(1, len(JOINT_NAMES) + 1)]
+    out += [bind(m, "armature", f"Ia{j}", ("joint", name, "armature"),
+                 nominal.joint(name).armature) for j, name in enumerate(JOINT_NAMES, 1)]
     if "encoder_offset" in model.effects:  # the offsets the diagnosis fits, and no others
         for name in model.block("encoder_offset").names:
             j = int(name.removeprefix("offset"))
@@ -89,7 +94,7 @@ def panda_export_spec(model: DiagnosisModel) -> tuple[mujoco.MjSpec, ArmPlantCha
 
 
 def _place(effect: str, j: int | None) -> list[Where]:
-    if effect in ("joint_friction", "link_friction", "encoder_offset", "encoder"):
+    if effect in ("joint_friction", "link_friction", "encoder_offset", "encoder", "armature"):
         return [("joint", JOINT_NAMES[j - 1])] if j and j <= len(JOINT_NAMES) else []
     if effect in ("link_inertia", "geometric"):
         return [("body", f"link{j}")] if j and j <= len(JOINT_NAMES) else []
@@ -102,7 +107,7 @@ def _place(effect: str, j: int | None) -> list[Where]:
     return []
 
 
-def _header(model: DiagnosisModel, changes: ArmPlantChanges) -> list[str]:
+def _header(model: DiagnosisModel, not_expressed: tuple[str, ...]) -> list[str]:
     evidence = dict(model.evidence)
     lines = [
         ("serpar export-mjcf: serpar's Panda (assets/arm/panda.xml) with the physics a "
@@ -116,7 +121,7 @@ def _header(model: DiagnosisModel, changes: ArmPlantChanges) -> list[str]:
          "along its motion."),
         "Established effects: " + (", ".join(model.effects) or "none") + "."]
     lines += [f"  {e}: {evidence[e]}" for e in model.effects if e in evidence]
-    lines += not_expressed_lines(changes.not_applied)
+    lines += not_expressed_lines(not_expressed)
     lines.append(f'The model itself: <custom><text name="{MODEL_TEXT}">; an element edited '
                  "after export wins over it when serpar reads the file back.")
     return lines
@@ -130,6 +135,8 @@ def export_panda_mjcf(model: DiagnosisModel, out: str | Path) -> MjcfExport:
                           f"export-mjcf writes the arm ({', '.join(APPLY)}); a Stewart model "
                           "goes to serpar run as its .stewart_params.json")
     spec, changes = panda_export_spec(model)
-    applied = tuple(e for e in model.effects if e in APPLY)
+    drive = tuple(e for e in model.effects if e in DRIVE_TORQUE)
+    applied = tuple(e for e in model.effects if e in APPLY and e not in drive)
+    not_expressed = tuple(f"{e}: {DRIVE_TORQUE[e]}" for e in drive) + changes.not_applied
     notes = effect_notes(model, applied, _place)
-    return write_export(spec, out, _header(model, changes), notes, applied, changes.not_applied)
+    return write_export(spec, out, _header(model, not_expressed), notes, applied, not_expressed)

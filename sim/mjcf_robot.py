@@ -37,7 +37,14 @@ from serpar.sim.mjcf_bindings import (
     friction_bindings,
     payload_record,
 )
-from serpar.sim.mjcf_notes import Where, effect_notes, evidence_of, joint_of, not_expressed_lines
+from serpar.sim.mjcf_notes import (
+    NO_MJCF_FORM,
+    Where,
+    effect_notes,
+    evidence_of,
+    joint_of,
+    not_expressed_lines,
+)
 from serpar.sim.mjcf_writer import MjcfExport, write_export
 from serpar.sim.model_file import DiagnosisModel, model_dict
 from serpar.sim.plants.arm_changes import EXTENT, PayloadBody, inertia_from_extent, inertia_problem
@@ -60,10 +67,7 @@ WHY_NOT: dict[str, str] = {
     "latency": "an actuation delay is an actuator's delay, and serpar's model of the arm keeps "
                "none of the file's actuators (they are its controller's)",
     "sensor_timing": "a torque sensor's delay, and serpar's model of the arm has no sensors",
-    "stribeck_friction": "MuJoCo's frictionloss is one dry level (the Coulomb part, from "
-                         "joint_friction): a fall with speed has no MJCF form",
-    "sigmoid_friction": "MuJoCo's frictionloss is one dry level, symmetric about zero speed: a "
-                        "sigmoid with an offset has no MJCF form",
+    **NO_MJCF_FORM,
     "coupled_pair": "one motor turning two joints loads one joint's drive with another joint's "
                     "motion; a MuJoCo joint's armature and friction act on its own motion only",
     "geometric": "serpar's geometric parameters are errors of MD-H frames; the file's link "

@@ -108,6 +108,11 @@ class PhysicsConfig:
             raise ConfigError(f"precision_solimp {self.precision_solimp} needs 0<d0<=dwidth<1, width>0")
 
     @property
+    def longest_step(self) -> float:
+        """[s] The longest step the cell takes (explicit forces must stay stable at it)."""
+        return max(self.timestep, self.transit_timestep or 0.0)
+
+    @property
     def grip_solref(self) -> tuple[float, float]:
         """solref of the pads' contacts (normal direction): time constant, damping ratio."""
         return (self.grip_timesteps * self.timestep, 1.0)

@@ -13,9 +13,9 @@ import pytest
 from serpar.cli.entry import main
 from serpar.errors import ConfigError
 from serpar.sim import names
-from serpar.sim.arm import GAZ_FRICTION_PHI, TORQUE_SENSOR_NAMES
+from serpar.sim.arm import GAZ_FRICTION_PHI, PANDA_COULOMB_FRICTION, TORQUE_SENSOR_NAMES
 from serpar.sim.plants.arm_changes import ArmPlantChanges
-from serpar.sim.plants.drive_friction import DriveFriction, gaz_friction_torque, gaz_levels
+from serpar.sim.plants.drive_friction import DriveFrictionLaw, gaz_friction_torque, gaz_levels
 from serpar.sim.scene import SceneConfig, build_scene
 from serpar.tasks.episode import build_runtime
 from serpar.tasks.episode_config import EpisodeConfig
@@ -35,7 +35,7 @@ def test_gaz_friction_is_the_published_model() -> None:
     # the offset is the sigmoid's shift: ~ -phi1 phi2 phi3 / 4 for small phi2 phi3
     np.testing.assert_allclose(offset, -2 * phi1 * phi2 * phi3 / 4, rtol=0.05)
     with pytest.raises(ConfigError, match="valid 0 < scale <= 5"):
-        DriveFriction(np.arange(7), 0.0)
+        DriveFrictionLaw.gaz(0.0)
 
 
 def test_gaz_form_is_a_drive_torque_not_a_joint_element() -> None:
@@ -78,7 +78,10 @@ def test_mix_draws_two_to_four_and_names_are_diagnoses() -> None:
     counts = [len(draw_effects("mix", np.random.default_rng(s))) for s in range(40)]
     assert min(counts) == 2 and max(counts) == 4
     assert set(EFFECTS) == {"joint_friction", "sensor_timing", "latency", "payload",
-                            "contact_friction"}
+                            "contact_friction", "stribeck_friction", "armature"}
+    old = {e for s in range(20) for e in draw_effects("mix", np.random.default_rng(s), s)}
+    new = {e for s in range(20, 60) for e in draw_effects("mix", np.random.default_rng(s), s)}
+    assert "stribeck_friction" not in old and "armature" not in old and new == set(EFFECTS)
     with pytest.raises(ConfigError, match="valid: mix, none, joint_friction"):
         draw_effects("gremlins", np.random.default_rng(0))
     changes, answer, model = concealed_cell("mix", 0, 3)
@@ -129,6 +132,27 @@ def test_the_documented_cells_draw_what_they_always_drew(cell) -> None:
         assert also["params"]["phi2_6"] == 17.133 and also["params"]["phi3_3"] == -0.04607
         # the level at speed joint_friction states is half the swing
         assert friction["params"]["Fc4"] == pytest.approx(also["params"]["phi1_4"] / 2)
+
+
+def test_a_cell_with_a_stribeck_fall_and_heavier_rotors_runs_them_in_its_arm(tmp_path) -> None:
+    """The drawn answer, in diagnose's names, is the plant the cell runs (its model file)."""
+    seed = next(s for s in range(20, 200) if {"stribeck_friction", "armature"} <= set(
+        draw_effects("mix", np.random.default_rng([s, 30]), s)))
+    changes, answer, model = concealed_cell("mix", seed, 1)
+    params = {e["effect"]: e["params"] for e in answer["effects"]}
+    fall, rotor = params["stribeck_friction"], params["armature"]
+    assert all(0.5 * c <= fall[f"dFs{j}"] <= 1.5 * c for j, c in enumerate(PANDA_COULOMB_FRICTION, 1))
+    assert all(0.02 <= fall[f"vs{j}"] <= 0.08 for j in range(1, 8))
+    assert rotor["Ia1"] == rotor["Ia2"] == 0 and all(0.015 <= rotor[f"Ia{j}"] <= 0.15 for j in range(3, 8))
+    assert model is not None and {"stribeck_friction", "armature"} <= set(model["effects"])
+    path = tmp_path / "answer.model.json"
+    path.write_text(json.dumps(model))
+    rt, _ = build_runtime(EpisodeConfig(holes=1, plant_model=str(path), **changes))
+    dofs = rt.scene.arm_dof_adr
+    np.testing.assert_allclose(rt.scene.model.dof_armature[dofs],
+                               0.1 + np.array([rotor[f"Ia{j}"] for j in range(1, 8)]), atol=1e-15)
+    assert rt.drive is not None and rt.drive.law.stribeck_excess == tuple(
+        fall[f"dFs{j}"] for j in range(1, 8))
 
 
 @pytest.mark.slow

@@ -43,7 +43,7 @@ def _every_effect(seed: int = 1) -> dict:
     geo = [f"j{i}.{p}" for i in j for p in MDH_PARAMS]
     return {"source": "test", "kind": "arm_dynamics",
             "effects": ["joint_friction", "payload", "link_inertia", "encoder_offset",
-                        "geometric", "latency", "sensor_timing"],
+                        "geometric", "latency", "sensor_timing", "armature"],
             "params": {
                 "joint_friction": _block([f"Fc{i}" for i in j] + [f"Fv{i}" for i in j],
                                          rng.uniform(0.1, 0.6, 14)),
@@ -55,7 +55,8 @@ def _every_effect(seed: int = 1) -> dict:
                 "encoder_offset": _block([f"offset{i}" for i in j], rng.normal(0, 1e-3, 7)),
                 "geometric": _block(geo, rng.normal(0, 1e-3, len(geo))),
                 "latency": _block(["delay"], [0.0012345678901]),
-                "sensor_timing": _block(["lag"], [0.00087654321])}}
+                "sensor_timing": _block(["lag"], [0.00087654321]),
+                "armature": _block([f"Ia{i}" for i in j], rng.uniform(-0.05, 0.05, 7))}}
 
 
 def test_every_effect_round_trips_exactly_and_loads_from_any_directory(tmp_path) -> None:
@@ -75,6 +76,7 @@ def test_every_effect_round_trips_exactly_and_loads_from_any_directory(tmp_path)
     assert m.actuator_delay[0] == 0.0012345678901 and m.opt.timestep == 1e-4
     assert m.actuator_history[0, 1] == 1  # read linearly: a continuous delay, not the step's
     assert m.sensor_delay[m.sensor("tau_J3").id] == 0.00087654321
+    np.testing.assert_array_equal(m.dof_armature[:7], 0.1 + np.array(model.block("armature").values))
     text = out.path.read_text()
     assert text.count("serpar diagnose: joint_friction: Fc") == len(JOINT_NAMES)
     assert "latency: delay = 0.00123457 +- 0.0001" in text

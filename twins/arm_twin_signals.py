@@ -11,7 +11,8 @@ from numpy.typing import NDArray
 
 from serpar.sim.arm import GAZ_FRICTION_PHI
 from serpar.sim.physics import PhysicsConfig
-from serpar.sim.plants.arm_reality import STRIBECK_SMOOTHING, Coupling, Reality
+from serpar.sim.plants.arm_reality import Coupling, Reality
+from serpar.sim.plants.drive_friction import STRIBECK_SMOOTHING
 from serpar.sim.plants.moving_arm import TwinRun
 from serpar.sim.rigid_arm import ArmDynamics
 from serpar.twins.arm_twin_physics import friction

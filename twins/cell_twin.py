@@ -13,8 +13,12 @@ with; both sit beside the recording, never in it.
 | latency | commands act 0.5-2 ms late | MuJoCo actuator ``delay`` | delay [s] |
 | payload | 0.05-0.3 kg more hand than the nominal one (a camera, an adapter) | a body on the flange | mass, com_x/y/z |
 | contact_friction | journal/bore friction 0.1-0.5 (nominal 0.2) | the cell's precision-contact friction | d_mu = mu - 0.2 |
+| stribeck_friction | static friction above the Coulomb level on every joint: Fs - Fc 0.5-1.5x a real Panda's Coulomb level, vs 0.02-0.08 rad/s | a drive torque (sim/plants/drive_friction.py) beside the cell's dry friction | dFs<j>, vs<j> |
+| armature | rotor inertia the MJCF lacks on joints 3-7: 0.3-1 x the nominal 0.1 kg m^2, +-50 % per joint | joint ``armature`` | Ia<j> |
 
-``mix`` draws two to four of them. The Stewart platform's leg offsets "within the calibrated
+``mix`` draws two to four of them: of the first five for seeds below
+:data:`EXTENDED_FROM_SEED` (what those seeds always drew, pinned by tests/test_cell_twin.py),
+of all seven from it on. The Stewart platform's leg offsets "within the calibrated
 residual" are not drawn: the cell's campaign calibrates the platform it runs on, so an offset
 it has not seen would have to be added after it, and at the calibrated residual's size (under
 1 um) no episode signal carries it.
@@ -31,22 +35,37 @@ import numpy as np
 
 from serpar.calibration.camera_cache import calibrated_pairs
 from serpar.errors import ConfigError
-from serpar.sim.arm import GAZ_FRICTION_PHI
+from serpar.sim.arm import (
+    GAZ_FRICTION_PHI,
+    JOINT_NAMES,
+    N_JOINTS,
+    PANDA_COULOMB_FRICTION,
+    build_arm_spec,
+)
 from serpar.sim.physics import PhysicsConfig
 from serpar.sim.plants.drive_friction import gaz_levels
 from serpar.sim.strict_json import dumps
 from serpar.tasks.episode import HoleRecord, run_episode
 from serpar.tasks.episode_config import N_HOLES, EpisodeConfig
 from serpar.tasks.run_episodes import recording_folder
+from serpar.twins.arm_twin_scale import ROTOR_JOINTS
 
-EFFECTS: tuple[str, ...] = ("joint_friction", "sensor_timing", "latency", "payload",
-                            "contact_friction")
+MIX_BEFORE_SEED_20: tuple[str, ...] = ("joint_friction", "sensor_timing", "latency", "payload",
+                                       "contact_friction")
+EFFECTS: tuple[str, ...] = MIX_BEFORE_SEED_20 + ("stribeck_friction", "armature")
+EXTENDED_FROM_SEED = 20
+"""``mix`` draws from every effect from this seed on; below it from :data:`MIX_BEFORE_SEED_20`,
+so the cells measured in docs/ draw what they always drew."""
+STRIBECK_SPEED = (0.02, 0.08)  # [rad/s], as the arm-dynamics twin's
+ROTOR_SCATTER = 0.5  # +-50 % per joint
 RANGES: dict[str, tuple[float, float]] = {
     "joint_friction": (1.5, 3.0),
     "sensor_timing": (0.0005, 0.002),
     "latency": (0.0005, 0.002),
     "payload": (0.05, 0.3),
     "contact_friction": (0.1, 0.5),
+    "stribeck_friction": (0.5, 1.5),
+    "armature": (0.3, 1.0),
 }
 NOMINAL = EpisodeConfig()
 """The nominal simulator a concealed cell differs from."""
@@ -61,12 +80,14 @@ def check_effect(effect: str) -> None:
         raise ConfigError(f"unknown cell effect {effect!r}; valid: mix, none, {', '.join(EFFECTS)}")
 
 
-def draw_effects(effect: str, rng: np.random.Generator) -> tuple[str, ...]:
-    """The effects of a twin: ``mix`` (two to four), one name, or ``none``."""
+def draw_effects(effect: str, rng: np.random.Generator, seed: int = 0) -> tuple[str, ...]:
+    """The effects of a twin: ``mix`` (two to four, from the pool of its seed), one name, or
+    ``none``."""
     check_effect(effect)
     if effect == "mix":
+        pool = EFFECTS if seed >= EXTENDED_FROM_SEED else MIX_BEFORE_SEED_20
         k = int(rng.integers(2, 5))
-        return tuple(sorted((str(e) for e in rng.choice(EFFECTS, size=k, replace=False)),
+        return tuple(sorted((str(e) for e in rng.choice(pool, size=k, replace=False)),
                             key=EFFECTS.index))
     return () if effect == "none" else (effect,)
 
@@ -81,6 +102,25 @@ def _payload(rng: np.random.Generator) -> dict[str, float]:
     side = 0.04 / np.sqrt(3.0)  # a solid 8 cm cube's extent
     return {"mass": mass, "com_x": float(com[0]), "com_y": float(com[1]), "com_z": float(com[2]),
             "Lxx": side, "Lyx": 0.0, "Lyy": side, "Lzx": 0.0, "Lzy": 0.0, "Lzz": side}
+
+
+def _stribeck(rng: np.random.Generator) -> dict[str, float]:
+    """Fs - Fc on every joint, relative to a real Panda's Coulomb level, and each joint's vs
+    (log-uniform)."""
+    ratio = rng.uniform(*RANGES["stribeck_friction"], N_JOINTS)
+    speed = np.exp(rng.uniform(*np.log(STRIBECK_SPEED), N_JOINTS))
+    return {**{f"dFs{j + 1}": float(r * c) for j, (r, c) in enumerate(zip(ratio, PANDA_COULOMB_FRICTION))},
+            **{f"vs{j + 1}": float(v) for j, v in enumerate(speed)}}
+
+
+def _rotors(rng: np.random.Generator) -> dict[str, float]:
+    """Rotor inertia the MJCF lacks on the Panda's rotor joints (twins/arm_twin_scale.py's
+    ROTOR_JOINTS: joint 1's and 2's are grouped with the links' inertia, no data name them)."""
+    mag = rng.uniform(*RANGES["armature"])
+    nominal = build_arm_spec()
+    return {f"Ia{j}": (float(mag * nominal.joint(n).armature
+                             * rng.uniform(1 - ROTOR_SCATTER, 1 + ROTOR_SCATTER))
+                       if j in ROTOR_JOINTS else 0.0) for j, n in enumerate(JOINT_NAMES, 1)}
 
 
 def sigmoid_params(scale: float) -> dict[str, float]:
@@ -99,7 +139,7 @@ def concealed_cell(effect: str, seed: int, holes: int
     if not 1 <= holes <= N_HOLES:
         raise ConfigError(f"--holes {holes}: valid 1..{N_HOLES}")
     rng = np.random.default_rng([seed, 30])
-    drawn = draw_effects(effect, rng)
+    drawn = draw_effects(effect, rng, seed)
     changes: dict[str, object] = {}
     answers: list[dict[str, object]] = []
     plant: dict[str, dict[str, list]] = {}
@@ -128,6 +168,10 @@ def concealed_cell(effect: str, seed: int, holes: int
             plant[name] = _block(params)
             answers.append({"effect": name, "params": {k: params[k] for k in
                                                        ("mass", "com_x", "com_y", "com_z")}})
+        elif name in ("stribeck_friction", "armature"):
+            params = _stribeck(rng) if name == "stribeck_friction" else _rotors(rng)
+            plant[name] = _block(params)
+            answers.append({"effect": name, "params": params})
         else:  # contact_friction
             mu = float(rng.uniform(*RANGES[name]))
             changes["contact_friction"] = mu

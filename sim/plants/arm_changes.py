@@ -30,6 +30,7 @@ from serpar.sim.arm import (
     N_JOINTS,
     TORQUE_SENSOR_NAMES,
 )
+from serpar.sim.plants.drive_friction import DriveFrictionLaw
 
 PAYLOAD_BODY = "plant_payload"
 FLANGE_BODY = "link7"
@@ -39,6 +40,7 @@ MAX_ANGLE_ERROR = 0.1  # [rad] beyond this an "error" is another robot, not a ca
 MAX_LENGTH_ERROR = 0.05  # [m]
 MAX_REF = 0.2  # [rad] the diagnosis' own bound on an encoder offset
 MAX_DELAY = 0.1  # [s]
+MAX_ARMATURE = 1.0  # [kg m^2] a rotor inertia change ten times the Panda's reflected armature
 INTERP_LINEAR = 1
 """MJCF ``interp="linear"`` of a sensor or actuator history (MuJoCo 4's Python bindings give no
 enum)."""
@@ -116,6 +118,12 @@ class ArmPlantChanges:
     ``arm_joint_friction``."""
     damping: tuple[float, ...] = ()
     """Viscous friction per joint [N m s/rad], the total (nominal included)."""
+    drive: DriveFrictionLaw | None = None
+    """Drive friction MuJoCo has no element for (sigmoid, Stribeck): the cell's runtime sets it
+    as a torque before every substep (sim/plants/drive_friction.py)."""
+    armature: tuple[float, ...] = ()
+    """Rotor inertia added to each joint's nominal armature [kg m^2] (negative: less; the
+    total is at least 0)."""
     joint_ref: tuple[float, ...] = ()
     """Encoder reading minus link angle per joint [rad] (MuJoCo joint ``ref``: the link stands
     in its MJCF frame when qpos = ref, so qpos reads the link angle plus the offset)."""
@@ -137,6 +145,9 @@ class ArmPlantChanges:
     def __post_init__(self) -> None:
         _floats("frictionloss", self.frictionloss, 0.0, 20.0)
         _floats("damping", self.damping, 0.0, 50.0)
+        _floats("armature", self.armature, -MAX_ARMATURE, MAX_ARMATURE)
+        if self.drive is not None and not isinstance(self.drive, DriveFrictionLaw):
+            raise ConfigError(f"drive must be a DriveFrictionLaw, got {type(self.drive).__name__}")
         _floats("joint_ref", self.joint_ref, -MAX_REF, MAX_REF)
         _floats("link_mass_scale", self.link_mass_scale, -0.9, 10.0)
         if self.payload is not None and not isinstance(self.payload, PayloadBody):
@@ -225,6 +236,8 @@ def apply_arm_plant(spec: mujoco.MjSpec, changes: ArmPlantChanges, timestep: flo
             joint.damping = damping
         if changes.joint_ref:
             joint.ref = changes.joint_ref[j]
+        if changes.armature:
+            joint.armature = max(joint.armature + changes.armature[j], 0.0)
     for j, scale in enumerate(changes.link_mass_scale):
         body = spec.body(f"link{j + 1}")
         body.mass *= 1.0 + scale

@@ -10,15 +10,17 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import expit
 
 from serpar.errors import ConfigError
 from serpar.sim.arm import N_JOINTS
+from serpar.sim.plants.drive_friction import (
+    STRIBECK_SMOOTHING,
+    sigmoid_friction_torque,
+    stribeck_fall_torque,
+)
 
 Vec = NDArray[np.float64]
 
-STRIBECK_SMOOTHING = 1e-3
-"""[rad/s] Width of the smoothed sign of the Stribeck friction (tanh(v / width))."""
 _VECTORS = (("torque_gain", -np.inf, np.inf, 0.0), ("torque_bias", -np.inf, np.inf, 0.0),
             ("encoder_offset", -np.inf, np.inf, 0.0), ("encoder_scale", -0.05, 0.05, 0.0),
             ("stribeck_excess", 0.0, 5.0, 0.0), ("stribeck_speed", 1e-3, 1.0, 0.05),
@@ -169,12 +171,8 @@ class Reality:
         sigmoid = self.sigmoid_phi
         if not stribeck and not self.ripple and self.coupling is None and sigmoid is None:
             return None
-        if sigmoid is not None:
-            phi1, phi2, phi3 = sigmoid
-            at_rest = expit(phi2 * phi3)
-        neg_excess, inv_speed = -self.stribeck_excess, 1.0 / self.stribeck_speed
-        inv_width = (1.0 / STRIBECK_SMOOTHING if self.stribeck_width is None
-                     else 1.0 / self.stribeck_width)
+        excess, speed = self.stribeck_excess, self.stribeck_speed
+        width = np.full(self.n, STRIBECK_SMOOTHING) if self.stribeck_width is None else self.stribeck_width
         joint = np.array([r[0] for r in self.ripple], int)
         amp, period, phase = (np.array([r[i] for r in self.ripple], float) for i in (1, 2, 3))
         wavenumber = 2 * np.pi / period if len(period) else period
@@ -185,13 +183,9 @@ class Reality:
             # tanh instead of sign: continuous through v = 0, where MuJoCo's frictionloss
             # constraint holds the joint; 1 mm/s keeps h * slope / inertia < 1 at the twin's
             # Fs - Fc (<= 0.8 N m on wrist joints of >= 0.1 kg m^2): explicit and still stable
-            if stribeck:
-                x = dq * inv_speed
-                out = neg_excess * np.exp(-x * x) * np.tanh(dq * inv_width)
-            else:
-                out = np.zeros(n)
+            out = -stribeck_fall_torque(dq, excess, speed, width) if stribeck else np.zeros(n)
             if sigmoid is not None:  # explicit: its slope phi1 phi2 / 4 is a few N m s/rad
-                out -= phi1 * (expit(phi2 * (dq + phi3)) - at_rest)
+                out -= sigmoid_friction_torque(dq, *sigmoid)
             if len(joint):
                 out[joint] += amp * np.sin(wavenumber * q[joint] + phase)
             if c is not None:

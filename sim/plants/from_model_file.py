@@ -15,6 +15,9 @@ arm_static_effects.py, kinematics/mdh.py):
 | geometric | j<i>.alpha/a/theta/d/beta | body link<i>'s pos/quat (beta: the next frame) |
 | latency | delay [s] | arm actuators' ``delay`` |
 | sensor_timing | lag [s] | the joint torque sensors' ``delay`` (linear between steps) |
+| sigmoid_friction | phi1_j [N m], phi2_j [s/rad], phi3_j [rad/s] | a drive torque before every substep (sim/plants/drive_friction.py), beside joint_friction's |
+| stribeck_friction | dFs<j> [N m], vs<j> [rad/s] | the same drive torque: dFs exp(-(v/vs)^2), its sign smoothed |
+| armature | Ia<j> [kg m^2] | joint ``armature`` = nominal + Ia (at least 0) |
 
 Not expressible, and reported (``ArmPlantChanges.not_applied``), with the reason in
 :data:`NOT_APPLICABLE`. A value the plant cannot take (negative friction or mass, a non-physical
@@ -27,6 +30,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from serpar.errors import ConfigError
 from serpar.sim.arm import JOINT_NAMES, N_JOINTS, build_arm_spec
 from serpar.sim.model_file import DiagnosisModel, ParamBlock, read_model_file
@@ -38,6 +43,7 @@ from serpar.sim.plants.arm_changes import (
     inertia_from_extent,
     inertia_problem,
 )
+from serpar.sim.plants.drive_friction import SPEEDS, STEEPNESS, DriveFrictionLaw
 
 J = range(1, N_JOINTS + 1)
 NOT_APPLICABLE: dict[str, str] = {
@@ -51,19 +57,10 @@ NOT_APPLICABLE: dict[str, str] = {
                      "for an episode",
     "torque_sensor": "a torque sensor's gain is its calibration, not physics: MuJoCo's torque "
                      "sensors have no gain",
-    "stribeck_friction": "MuJoCo's frictionloss is one dry level (the Coulomb part, from "
-                         "joint_friction): a fall with speed needs a drive torque the cell's "
-                         "arm does not model",
-    "sigmoid_friction": "per-joint sigmoid friction (phi1..phi3) is not yet mapped onto the "
-                        "cell's arm, whose drive friction runs Gaz et al.'s own phi at one scale "
-                        "(the episode config's arm_friction_form: gaz)",
     "base_tilt": "a tilted arm base is not yet mapped onto the cell's arm mount (turning the "
                  "cell's gravity would tilt the platform and the plate too)",
     "encoder_scale": "a transmission-ratio error between reading and link: a MuJoCo hinge has no "
                      "gear between its qpos and the link angle",
-    "armature": "a rotor-inertia change is not yet mapped onto the cell's arm (its armature "
-                "comes from assets/arm/panda.xml): serpar diagnose --mjcf writes it into the "
-                "arm's own MJCF",
     "coupled_pair": "the cell's Panda has one motor per joint: a coupled motor belongs to "
                     "another arm",
     "link_inertial": "base inertial parameters do not fix the links' masses, centres of mass "
@@ -111,6 +108,47 @@ def _friction(block: ParamBlock, d: _Draft, effect: str = "joint_friction") -> N
             d.notes.append(f"{effect} Fv{j} = {fv:.3g} N m s/rad takes the damping below "
                            "0: applied as 0")
         damping[j - 1] = max(damping[j - 1] + fv, 0.0)
+
+
+def _drive(law: DriveFrictionLaw, d: _Draft) -> None:
+    old = d.fields.get("drive")
+    d.fields["drive"] = law if old is None else old.plus(law)  # type: ignore[union-attr]
+
+
+def _sigmoid(block: ParamBlock, d: _Draft) -> None:
+    """A joint whose phi1 is 0 (or not fitted) has no sigmoid: its phi2, phi3 do nothing."""
+    p = _names("sigmoid_friction", block, tuple(f"phi{k}_{j}" for k in (1, 2, 3) for j in J))
+    phi1, phi2, phi3 = [], [], []
+    for j in J:
+        swing = p.get(f"phi1_{j}", 0.0)
+        if swing < 0:
+            d.notes.append(f"sigmoid_friction phi1_{j} = {swing:.3g} N m < 0: applied as 0")
+        steep = p.get(f"phi2_{j}", 1.0)
+        if swing > 0 and not STEEPNESS[0] <= steep <= STEEPNESS[1]:
+            d.notes.append(f"sigmoid_friction phi2_{j} = {steep:.3g} s/rad: applied as "
+                           f"{STEEPNESS[0]:g}..{STEEPNESS[1]:g}")
+        phi1.append(max(swing, 0.0))
+        phi2.append(float(np.clip(steep, *STEEPNESS)))
+        phi3.append(p.get(f"phi3_{j}", 0.0) if swing > 0 else 0.0)
+    _drive(DriveFrictionLaw(sigmoids=((tuple(phi1), tuple(phi2), tuple(phi3)),)), d)
+
+
+def _stribeck(block: ParamBlock, d: _Draft) -> None:
+    p = _names("stribeck_friction", block, tuple(f"dFs{j}" for j in J) + tuple(f"vs{j}" for j in J))
+    excess, speed = [], []
+    for j in J:
+        fall = p.get(f"dFs{j}", 0.0)
+        if fall < 0:
+            d.notes.append(f"stribeck_friction dFs{j} = {fall:.3g} N m < 0 (static friction "
+                           "below the Coulomb level): applied as 0")
+        excess.append(max(fall, 0.0))
+        speed.append(float(np.clip(p.get(f"vs{j}", 0.05), *SPEEDS)))
+    _drive(DriveFrictionLaw(stribeck_excess=tuple(excess), stribeck_speed=tuple(speed)), d)
+
+
+def _armature(block: ParamBlock, d: _Draft) -> None:
+    p = _names("armature", block, tuple(f"Ia{j}" for j in J))
+    d.fields["armature"] = [p.get(f"Ia{j}", 0.0) for j in J]
 
 
 def _link_friction(block: ParamBlock, d: _Draft) -> None:
@@ -200,7 +238,8 @@ _sensor_timing = _delay("sensor_timing", "lag", "torque_sensor_delay",
 APPLY: dict[str, Callable[[ParamBlock, _Draft], None]] = {
     "joint_friction": _friction, "link_friction": _link_friction, "payload": _payload, "link_inertia": _links,
     "encoder_offset": _offsets, "encoder": _encoder, "geometric": _geometric,
-    "latency": _latency, "sensor_timing": _sensor_timing,
+    "latency": _latency, "sensor_timing": _sensor_timing, "sigmoid_friction": _sigmoid,
+    "stribeck_friction": _stribeck, "armature": _armature,
 }
 KNOWN_EFFECTS: tuple[str, ...] = tuple(APPLY) + tuple(NOT_APPLICABLE)
 
@@ -246,6 +285,9 @@ def applied_parts(changes: ArmPlantChanges) -> list[str]:
     """The parts of the plant that ``changes`` moves off nominal, in words."""
     return [name for name, on in (
         ("joint friction", bool(changes.frictionloss or changes.damping)),
+        (f"drive friction ({changes.drive.words()})" if changes.drive else "",
+         bool(changes.drive)),
+        ("rotor inertia (armature)", bool(changes.armature)),
         ("payload body", changes.payload is not None),
         ("link mass/inertia", bool(changes.link_mass_scale)),
         ("encoder offsets (joint ref)", bool(changes.joint_ref)),
