@@ -64,6 +64,9 @@ contact friction at once; the resampling rules decide which of them are establis
 MIN_SLIDES = 2
 """Chamfer slides an episode needs for the contact-friction candidate: one to fit, one to
 hold out."""
+PHASE_CHECKED = ("link_inertia", "link_inertial")
+"""Effects established only where two free-motion phases show them alike
+(diagnosis/phase_consistency.py): a link's mass loads every move with one number."""
 MIN_ROWS = 40
 """Fewest free-motion windows an episode must give (about 2 s at the default window)."""
 
@@ -79,7 +82,8 @@ class EpisodeFamily:
     chamfer slides (diagnosis/insertion_friction.py), one row each after the windows."""
 
     def __init__(self, inner: ArmDynamicsFamily, keep: NDArray[np.int64],
-                 excluded: Mapping[str, int], slides: ChamferSlides | None = None) -> None:
+                 excluded: Mapping[str, int], slides: ChamferSlides | None = None,
+                 phases: NDArray[np.str_] | None = None) -> None:
         if len(keep) < MIN_ROWS:
             raise IdentificationError(
                 f"the episode has {len(keep)} comparison windows in free motion "
@@ -98,6 +102,10 @@ class EpisodeFamily:
         self.max_effects = MAX_EFFECTS
         self.n_arm = len(self.keep)
         self.n_samples = self.n_arm + (self.slides.n if self.slides else 0)
+        arm_phases = np.full(self.n_arm, "") if phases is None else np.asarray(phases, str)
+        self.row_phases = np.concatenate([arm_phases, np.full(self.n_samples - self.n_arm, "")])
+        """Each row's free-motion phase ("" for a chamfer slide): diagnosis/phase_consistency.py."""
+        self.phase_checked = PHASE_CHECKED
         dropped = ", ".join(f"{n} in {p}" for p, n in self.excluded.items() if n)
         skipped = "; ".join(f"{n} {why}" for why, n in (slides.not_used if slides else {}).items())
         self.kind = (f"{KIND} (arm dynamics over {self.n_arm} free-motion windows; contact "
@@ -232,25 +240,35 @@ class EpisodeFamily:
 def free_windows(rec: Recording, inner: ArmDynamicsFamily) -> tuple[NDArray[np.int64], dict[str, int]]:
     """Rows of ``inner`` whose whole window lies inside one free-motion phase, and the count of
     the others per phase (a window straddling two phases counts for the first)."""
+    keep, excluded, _ = free_windows_by_phase(rec, inner)
+    return keep, excluded
+
+
+def free_windows_by_phase(rec: Recording, inner: ArmDynamicsFamily
+                          ) -> tuple[NDArray[np.int64], dict[str, int], NDArray[np.str_]]:
+    """:func:`free_windows`, and the phase each kept row lies in."""
     t = inner.terms
     half_s = t.rows.half / float(rec.meta.sample_rate_hz)
     lo, hi = t.time - half_s, t.time + half_s
     keep = np.zeros(len(t.time), bool)
     where = np.full(len(t.time), "", dtype=object)
+    phase = np.full(len(t.time), "", dtype=object)
     for p in rec.meta.phases:
         inside = (lo >= p.start) & (hi <= p.end)
         touches = (hi >= p.start) & (lo <= p.end) & (where == "")
         where[touches] = p.name
         if p.name in FREE_PHASES:
             keep |= inside
+            phase[inside] = p.name
     excluded: dict[str, int] = {}
     for name in where[~keep]:
         excluded[name or "outside every phase"] = excluded.get(name or "outside every phase", 0) + 1
-    return np.flatnonzero(keep), excluded
+    rows = np.flatnonzero(keep)
+    return rows, excluded, phase[rows].astype(str)
 
 
 def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None) -> EpisodeFamily:
     """The episode family of ``rec`` (IdentificationError names what the recording lacks)."""
     inner = dynamics_family(rec, cfg or ArmDynamicsConfig(tare_knot_s=TARE_KNOT_S))
-    keep, excluded = free_windows(rec, inner)
-    return EpisodeFamily(inner, keep, excluded, chamfer_slides(rec))
+    keep, excluded, phases = free_windows_by_phase(rec, inner)
+    return EpisodeFamily(inner, keep, excluded, chamfer_slides(rec), phases)

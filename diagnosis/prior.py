@@ -27,7 +27,7 @@ Vec = NDArray[np.float64]
 
 
 PASSED_THROUGH = ("folds", "noise_ratio", "channels", "empirical_library", "in_units",
-                  "residual_parts", "not_identifiable")
+                  "residual_parts", "not_identifiable", "row_phases", "phase_checked")
 """Optional Family hooks a prior leaves as the inner family has them."""
 
 

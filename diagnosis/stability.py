@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from serpar.diagnosis.channel_check import ChannelCheck, channel_check
 from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.fit import Fit, blocks_of, earns, fit_model
+from serpar.diagnosis.phase_consistency import phase_reasons
 
 Rows = NDArray[np.int64]
 
@@ -243,6 +244,8 @@ def assess(family: Family, final: Fit, share_of_remaining: Mapping[str, float],
             why = reasons_not_established(effect, fit.params[name], combined_std(fit, name, r), r,
                                           share_of_remaining[name],
                                           channel_check(family, fit.params, name, heldout))
+            if not why:  # only then: it refits the model per phase
+                why = phase_reasons(family, fit, name, train, heldout, overrides, report)
             out[name] = Assessment(tuple(why), r, fit)
             if why:
                 failing.append((r.frequency if r is not None else 1.0, -fit.active.index(name),
