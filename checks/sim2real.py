@@ -23,6 +23,8 @@ import numpy as np
 from scipy import stats
 
 from serpar.calibration.camera_cache import calibrated_pairs
+from serpar.diagnosis.bore_friction import MU_RANGE as BORE_MU_RANGE
+from serpar.diagnosis.bore_friction import BoreFriction, bore_friction
 from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis
 from serpar.diagnosis.config_model import model_from_config
 from serpar.diagnosis.prior import PriorFamily
@@ -39,7 +41,10 @@ from serpar.tasks.run_episodes import recording_folder
 
 Tick = Callable[[str], None]
 NOMINAL_MU = PhysicsConfig().precision_friction
-MU_RANGE = (0.01, 1.5)
+MU_RANGE = BORE_MU_RANGE
+MU_STEP_UP, MU_STEP_DOWN = 0.25, 0.1
+"""The second mu a bore-friction rerun takes, above or below the nominal's (the concealed
+cells' range: 0.1-0.5)."""
 
 
 @dataclass(frozen=True)
@@ -157,6 +162,67 @@ def diagnose_cell(episodes: list[RealEpisode], nominal: EpisodeConfig, source: s
     diag = diagnose(family, seed, report=report)
     diag = dataclasses.replace(diag, model=family.combined_model(diag.model))
     return diag, diag.model_file(str(longest.folder)), notes
+
+
+def bore_rerun_mu(real: list[HoleOutcome], nominal: list[HoleOutcome], mu0: float
+                  ) -> tuple[float | None, str]:
+    """The second mu to rerun the holes at for the bore's friction, or None with why not: the
+    real in-bore push against the simulator's at ``mu0``, paired per hole; where it agrees
+    within its 95 % CI there is nothing to fit and no rerun is spent."""
+    by_hole = {(h.cycle, h.hole): h.bore_axial for h in nominal if h.bore_axial is not None}
+    d = np.array([h.bore_axial[0] - by_hole[(h.cycle, h.hole)][0] for h in real
+                  if h.bore_axial is not None and (h.cycle, h.hole) in by_hole])
+    if d.size < 2:
+        return None, (f"{d.size} seated insertion(s) with an in-bore travel in both the cell and "
+                      "the simulator; 2 needed")
+    ci = float(stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / math.sqrt(d.size))
+    if abs(d.mean()) <= ci:
+        return None, (f"the in-bore push agrees with the simulator's at mu {mu0:.3g} "
+                      f"({d.mean():+.3g} ± {ci:.2g} N over {d.size} holes): nothing to fit")
+    step = MU_STEP_UP if d.mean() > 0 else -min(MU_STEP_DOWN, mu0 - MU_RANGE[0])
+    return mu0 + step, ""
+
+
+def bore_stage(episodes: list[RealEpisode], real: list[HoleOutcome], nominal: list[HoleOutcome],
+               out: Path, start_model: str | None, step: Tick) -> BoreFriction:
+    """The bore's friction from the insertions: a rerun of the holes at a second mu where the
+    cell's in-bore push differs from the simulator's (diagnosis/bore_friction.py)."""
+    mu1, why = bore_rerun_mu(real, nominal, NOMINAL_MU)
+    if mu1 is None:
+        return BoreFriction(None, None, 0, (NOMINAL_MU, NOMINAL_MU), why,
+                            agrees=why.startswith("the in-bore push agrees"))
+    step(f"the in-bore push differs from the simulator's: the holes again at mu {mu1:.3g}")
+    other = outcomes_of(rerun(episodes, out / "bore_mu", start_model, mu1, step))
+    return bore_friction(real, nominal, other, NOMINAL_MU, mu1)
+
+
+def with_bore_friction(model: dict[str, object], found: BoreFriction) -> tuple[dict[str, object], str]:
+    """The updated model with the bore's friction the insertions show (as ``contact_friction``'s
+    d_mu), and a note; the diagnosis's own estimate (chamfer slides) is kept where it has one
+    and the two disagree, their inverse-variance mean taken where they agree within 2 sigma."""
+    if found.mu is None or found.std is None:
+        return model, ""
+    effects = list(model["effects"])  # type: ignore[call-overload]
+    params = dict(model["params"])  # type: ignore[call-overload]
+    d_mu, std = found.mu - NOMINAL_MU, found.std
+    note = f"{found.words()}: in the updated model"
+    if "contact_friction" in effects:
+        block = params["contact_friction"]
+        slide, slide_std = float(block["values"][0]), float(block["std"][0])
+        gap = abs(slide - d_mu) / math.hypot(slide_std, std)
+        if gap > 2.0:
+            return model, (f"{found.words()}: {gap:.2g} sigma from the chamfer slides' mu = "
+                           f"{NOMINAL_MU + slide:.3g} ± {slide_std:.2g}; the updated model keeps "
+                           "the slides'")
+        w = np.array([slide_std, std]) ** -2.0
+        d_mu = float((w @ [slide, d_mu]) / w.sum())
+        std = float(w.sum() ** -0.5)
+        note = (f"{found.words()}, with the chamfer slides' (within {gap:.2g} sigma): mu = "
+                f"{NOMINAL_MU + d_mu:.3g} ± {std:.2g} in the updated model")
+    else:
+        effects.append("contact_friction")
+    params["contact_friction"] = {"values": [d_mu], "std": [std], "names": ["d_mu"]}
+    return {**model, "effects": effects, "params": params}, note
 
 
 def updated_contact_friction(model: dict[str, object]) -> float | None:

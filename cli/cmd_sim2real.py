@@ -9,6 +9,7 @@ from pathlib import Path
 
 from serpar.checks.sim2real import (
     OutcomeDiff,
+    bore_stage,
     compare,
     diagnose_cell,
     established,
@@ -16,6 +17,7 @@ from serpar.checks.sim2real import (
     real_episodes,
     rerun,
     updated_contact_friction,
+    with_bore_friction,
     write_updated,
 )
 from serpar.checks.sim2real_report import write_sim2real_report
@@ -114,13 +116,16 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
             n = len(real_outcomes)
             step(f"{n} hole{'s' * (n != 1)} in {len(episodes)} recording(s); the nominal "
                  "simulator on the same holes")
-            before = compare(real_outcomes,
-                             outcomes_of(rerun(episodes, out / "nominal", start_model, None, step)))
+            nominal_outcomes = outcomes_of(rerun(episodes, out / "nominal", start_model, None, step))
+            before = compare(real_outcomes, nominal_outcomes)
+            bore = bore_stage(episodes, real_outcomes, nominal_outcomes, out, start_model, step)
             step("diagnosing the real recordings against it")
             nominal = dataclasses.replace(episodes[0].config, plant_model=start_model)
             diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell",
                                               args.seed, step)
             notes += more
+            model, bore_note = with_bore_friction(model, bore)
+            notes += [bore_note] if bore_note else []
             model_path, exported = write_updated(model, out)
             contact = updated_contact_friction(model)
             step(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
@@ -139,6 +144,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                                      "after": after[n].as_dict()} for n in OUTCOMES},
                     "established": found, "diagnosis_verdict": diag.verdict,
                     "not_identifiable": list(diag.not_identifiable),
+                    "bore_friction": bore.as_dict(),
                     "updated_model": str(model_path), "mjcf": export_summary(exported),
                     "contact_friction": contact, "further_after_update": further(before, after),
                     "verdict": words, "notes": notes,
@@ -151,6 +157,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     print(f"diagnosis: {diag.verdict}")
     if diag.not_identifiable:
         print("not identifiable on these holes: " + "; ".join(diag.not_identifiable))
+    print(bore.words())
     print(f"verdict: {words}")
     print(f"updated model: {model_path}   MJCF: {exported.path}"
           + (f"   report: {report}" if report else ""))

@@ -139,12 +139,12 @@ def chamfer_slides(rec: Recording) -> ChamferSlides:
         lateral, axial = f[seg, :2] @ direction, f[seg, 2]
         span = seg.size * dt
         rows.append((t[seg[0]], lateral.mean(), axial.mean(),
-                     _sigma_mean(f[pre, :2] @ direction, dt, span),
-                     _sigma_mean(f[pre, 2], dt, span), seg.size))
+                     sigma_of_mean(f[pre, :2] @ direction, dt, span),
+                     sigma_of_mean(f[pre, 2], dt, span), seg.size))
     return _slides(rows, not_used)
 
 
-def _sigma_mean(x: Vec, dt: float, span: float) -> float:
+def sigma_of_mean(x: Vec, dt: float, span: float) -> float:
     """Sigma of the mean over ``span`` seconds of a series with ``x``'s scatter and correlation
     time: variance sigma^2 * 2 tau / T (at most sigma^2)."""
     return float(x.std() * np.sqrt(min(1.0, 2 * _correlation_time(x, dt) / span)))

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from serpar.diagnosis.insertion_friction import CONTACT_N, chamfer_slides
+from serpar.diagnosis.insertion_friction import CONTACT_N, chamfer_slides, sigma_of_mean
 from serpar.errors import ConfigError
 from serpar.sim import channels as ch
 from serpar.sim.recording import Recording, read_recording
@@ -61,11 +61,21 @@ MEET_M = 1.6e-3
 entry chamfer 0.1 mm (sim/conductor.py, sim/baseplate.py)."""
 
 
+BORE_M = (0.1e-3, 1.3e-3)
+"""[m] Tip height over its seated height while the journal travels in the bore: below the
+entry chamfer (1.4 mm and up), above the shoulder's landing."""
+MIN_BORE_SAMPLES = 20
+
+
 @dataclass(frozen=True)
 class HoleOutcome:
     cycle: int
     hole: int | None
     values: dict[str, float]
+    bore_axial: tuple[float, float] | None = None
+    """A seated insertion's mean axial force while the journal travels in the bore [N] and its
+    sigma (from the window's own scatter and correlation time): the bore's friction against
+    the push (diagnosis/bore_friction.py); None where the travel was not seen."""
 
 
 def _column(rec: Recording, name: str) -> Vec:
@@ -81,6 +91,21 @@ def _cycles(rec: Recording) -> list[tuple[float, float] | None]:
         elif p.name == "insert" and out:
             out[-1] = (p.start, p.end)
     return out
+
+
+def _bore_axial(t: Vec, z: Vec, f: Vec, span: tuple[float, float]) -> tuple[float, float] | None:
+    """The mean axial estimate over the in-bore travel of a seated insertion, and its sigma."""
+    s = np.flatnonzero((t >= span[0]) & (t <= span[1]))
+    if s.size < 10:
+        return None
+    z_end = float(z[s[t[s] >= t[s[-1]] - TAIL_S]].mean())
+    h = z[s] - z_end
+    inside = s[(h > BORE_M[0]) & (h < BORE_M[1])]
+    if inside.size < MIN_BORE_SAMPLES:
+        return None
+    axial = f[inside, 2]
+    dt = float(np.median(np.diff(t[s])))
+    return float(axial.mean()), sigma_of_mean(axial, dt, inside.size * dt)
 
 
 def _insertion(t: Vec, z: Vec, xy: Vec, f: Vec, span: tuple[float, float], seated: bool
@@ -137,6 +162,7 @@ def hole_outcomes(folder: str | Path) -> list[HoleOutcome]:
         seated = record.get("outcome") == "success"
         values = {"seated": float(seated), "jam": float(record.get("outcome") == "jam")}
         span = spans[cycle] if cycle < len(spans) else None
+        bore = _bore_axial(t, z, f, span) if span is not None and seated else None
         if span is None:
             values |= dict.fromkeys(("seated_depth", "peak_axial_force", "peak_lateral_force",
                                      "contact_to_seated", "misalignment_at_contact",
@@ -146,5 +172,5 @@ def hole_outcomes(folder: str | Path) -> list[HoleOutcome]:
             values["chamfer_slide"] = float(np.any((slides.time >= span[0]) & (slides.time <= span[1])))
         hole = record.get("hole")
         out.append(HoleOutcome(cycle, None if hole is None else int(hole),
-                               {k: values[k] for k in OUTCOMES}))
+                               {k: values[k] for k in OUTCOMES}, bore))
     return out

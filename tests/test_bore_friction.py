@@ -1,0 +1,76 @@
+"""The bore's friction from the insertions' in-bore push, read through the simulator's reruns at
+two mu (diagnosis/bore_friction.py, checks/sim2real.py): synthetic holes whose truth is known."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from serpar.checks.sim2real import NOMINAL_MU, bore_rerun_mu, with_bore_friction
+from serpar.diagnosis.bore_friction import bore_friction
+from serpar.diagnosis.task_outcomes import OUTCOMES, HoleOutcome
+
+
+def _holes(push: np.ndarray) -> list[HoleOutcome]:
+    base = dict.fromkeys(OUTCOMES, 0.0)
+    return [HoleOutcome(k, k, base, (float(f), 0.05)) for k, f in enumerate(push)]
+
+
+def _cell(mu: float, n: int = 12, noise: float = 0.1, seed: int = 0) -> np.ndarray:
+    """Each hole's wall load N_h (its own misalignment) times mu, plus the chaos of contact."""
+    rng = np.random.default_rng(seed)
+    wall = np.linspace(2.0, 6.0, n)
+    return mu * wall + rng.normal(0.0, noise, n)
+
+
+def test_mu_is_read_on_the_line_through_two_reruns() -> None:
+    real, at_nominal = _cell(0.445, seed=1), _cell(NOMINAL_MU, seed=2)
+    mu1, why = bore_rerun_mu(_holes(real), _holes(at_nominal), NOMINAL_MU)
+    assert why == "" and mu1 == pytest.approx(NOMINAL_MU + 0.25)  # the cell pushes harder
+    found = bore_friction(_holes(real), _holes(at_nominal), _holes(_cell(mu1, seed=3)),
+                          NOMINAL_MU, mu1)
+    assert found.mu is not None and found.std is not None
+    assert abs(found.mu - 0.445) < 2 * found.std and found.std < 0.05 and found.holes == 12
+    model, note = with_bore_friction({"effects": ["payload"], "params": {"payload": {}}}, found)
+    assert model["effects"] == ["payload", "contact_friction"]
+    assert model["params"]["contact_friction"]["values"][0] == pytest.approx(found.mu - NOMINAL_MU)
+    assert "in the updated model" in note
+
+
+def test_a_push_the_simulator_matches_spends_no_rerun() -> None:
+    mu1, why = bore_rerun_mu(_holes(_cell(NOMINAL_MU, seed=1)), _holes(_cell(NOMINAL_MU, seed=2)),
+                             NOMINAL_MU)
+    assert mu1 is None and "agrees with the simulator's" in why
+    mu1, why = bore_rerun_mu(_holes(_cell(0.3)[:1]), _holes(_cell(NOMINAL_MU)[:1]), NOMINAL_MU)
+    assert mu1 is None and "2 needed" in why
+
+
+def test_holes_whose_push_does_not_feel_mu_leave_it_not_identifiable() -> None:
+    """Journals that slide down the bore's axis touch no wall: mu moves nothing."""
+    flat = np.full(8, 0.5)
+    found = []
+    for seed in range(40):  # a chance false finding at most as often as 3 sigma's level says
+        rng = np.random.default_rng(seed)
+        found.append(bore_friction(*(_holes(flat + rng.normal(0, 0.1, 8)) for _ in range(3)),
+                                   NOMINAL_MU, NOMINAL_MU + 0.25))
+    assert sum(f.mu is not None for f in found) <= 1
+    assert all("does not load the bore's wall enough" in f.reason for f in found if f.mu is None)
+    model, note = with_bore_friction({"effects": [], "params": {}}, found[1])
+    assert model == {"effects": [], "params": {}} and note == ""
+
+
+def test_the_chamfer_slides_estimate_and_the_bores_are_combined_or_kept_apart() -> None:
+    real, nominal = _cell(0.4, seed=1), _cell(NOMINAL_MU, seed=2)
+    found = bore_friction(_holes(real), _holes(nominal), _holes(_cell(0.45, seed=3)),
+                          NOMINAL_MU, 0.45)
+    assert found.mu is not None and found.std is not None
+    slides = {"effects": ["contact_friction"], "params": {"contact_friction": {
+        "values": [found.mu - NOMINAL_MU + found.std], "std": [found.std], "names": ["d_mu"]}}}
+    model, note = with_bore_friction(slides, found)
+    combined = model["params"]["contact_friction"]
+    assert combined["values"][0] == pytest.approx(found.mu - NOMINAL_MU + found.std / 2)
+    assert combined["std"][0] == pytest.approx(found.std / np.sqrt(2)) and "with the chamfer" in note
+    far = {"effects": ["contact_friction"], "params": {"contact_friction": {
+        "values": [found.mu - NOMINAL_MU + 10 * found.std], "std": [found.std], "names": ["d_mu"]}}}
+    model, note = with_bore_friction(far, found)
+    assert model is far and "keeps the slides'" in note
