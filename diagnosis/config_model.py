@@ -7,10 +7,11 @@ What carries over (tasks/episode_config.py's ``scene_config``):
 
 - ``arm_friction`` x the Panda's dry friction levels (serpar.sim.arm.PANDA_COULOMB_FRICTION) as the
   ``joint_friction`` effect (Fc; Fv 0: the cell's arm adds no viscous term); with
-  ``arm_friction_form: gaz`` the same levels, the sigmoid's level at speed (its offset and its
-  smooth passage through zero are outside the effect's form: said in the model's evidence);
+  ``arm_friction_form: gaz`` Gaz et al.'s sigmoid at that scale as the ``sigmoid_friction``
+  effect (phi1 scaled, phi2 and phi3 theirs: the cell's drive torque exactly);
 - ``plant_model``: that diagnosis model file's effects; its joint friction, when it has one,
-  replaces ``arm_friction``'s, as it does in the cell.
+  replaces ``arm_friction``'s, as it does in the cell; its drive friction (sigmoid, Stribeck)
+  acts beside the config's.
 
 Nothing else in an episode config changes the arm's dynamics (the Stewart errors, cameras and
 tolerances belong to other parts of the cell), so nothing else is taken.
@@ -25,6 +26,7 @@ from serpar.sim.arm import PANDA_COULOMB_FRICTION
 from serpar.sim.config_io import load_yaml_config
 from serpar.sim.mjcf_export import read_any_model
 from serpar.sim.model_file import DiagnosisModel, ParamBlock
+from serpar.sim.plants.drive_friction import gaz_sigmoid_params
 from serpar.tasks.episode_config import EpisodeConfig
 
 CONFIG_SUFFIXES = (".yaml", ".yml")
@@ -54,13 +56,22 @@ def model_from_config(cfg: EpisodeConfig, source: str) -> DiagnosisModel:
         plant = read_any_model(cfg.plant_model)
         effects += plant.effects
         blocks += [b for b in plant.blocks if b[0] in plant.effects]
-    if cfg.arm_friction and "joint_friction" not in effects:
+    evidence: tuple[tuple[str, str], ...] = ()
+    if cfg.arm_friction and "joint_friction" not in effects and cfg.arm_friction_form == "gaz":
+        if "sigmoid_friction" in effects:
+            raise ConfigError(f"config {p}: arm_friction_form gaz and a plant model with its own "
+                              "sigmoid_friction act together in the cell, which one model's "
+                              "sigmoid cannot state; give the sum in the plant model")
+        params = gaz_sigmoid_params(cfg.arm_friction)
+        effects.append("sigmoid_friction")
+        blocks.append(("sigmoid_friction", ParamBlock(tuple(params), tuple(params.values()),
+                                                      (0.0,) * len(params))))
+        evidence = (("sigmoid_friction", (f"Gaz et al.'s sigmoid at {cfg.arm_friction:g} x a "
+                     "real Panda's (arm_friction_form: gaz)")),)
+    elif cfg.arm_friction and "joint_friction" not in effects:
         names = tuple(f"Fc{j}" for j in JOINTS) + tuple(f"Fv{j}" for j in JOINTS)
         values = tuple(cfg.arm_friction * f for f in PANDA_COULOMB_FRICTION) + (0.0,) * len(JOINTS)
         effects.append("joint_friction")
         blocks.append(("joint_friction", ParamBlock(names, values, (0.0,) * len(names))))
-    gaz = ("the level at speed of the Gaz sigmoid the config names (arm_friction_form: gaz); "
-           "its offset and its passage through zero are not in this form")
-    evidence = (("joint_friction", gaz),) if cfg.arm_friction_form == "gaz" and cfg.arm_friction else ()
     return DiagnosisModel(str(p), f"episode config {p}", "arm_dynamics", tuple(effects),
                           tuple(blocks), evidence=evidence)

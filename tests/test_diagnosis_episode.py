@@ -20,7 +20,7 @@ from serpar.diagnosis.insertion_friction import NOMINAL_MU
 from serpar.diagnosis.prior import PriorFamily
 from serpar.diagnosis.select import diagnose
 from serpar.errors import ConfigError
-from serpar.sim.arm import PANDA_COULOMB_FRICTION
+from serpar.sim.arm import GAZ_FRICTION_PHI, PANDA_COULOMB_FRICTION
 from serpar.sim.recording import read_recording
 from serpar.tasks.episode import run_episode
 from serpar.tasks.episode_config import EpisodeConfig
@@ -168,6 +168,13 @@ def test_episode_config_as_a_model(tmp_path) -> None:
     assert np.allclose(block.values[7:], 0.0)
     cell.write_text("arm_friction: 0.0\n")
     assert model_from_episode_config(cell).effects == ()
+    # the published form: the cell's drive torque exactly, in sigmoid_friction's names
+    cell.write_text("arm_friction: 2.5\narm_friction_form: gaz\n")
+    model = model_from_episode_config(cell)
+    assert model.effects == ("sigmoid_friction",)
+    phi = model.block("sigmoid_friction").as_dict()
+    assert phi["phi1_4"] == 2.5 * GAZ_FRICTION_PHI[0][3] and phi["phi2_6"] == GAZ_FRICTION_PHI[1][5]
+    assert phi["phi3_3"] == GAZ_FRICTION_PHI[2][2]
     with pytest.raises(ConfigError, match="not found"):
         model_from_episode_config(tmp_path / "missing.yaml")
     cell.write_text("arm_frictoin: 0.3\n")

@@ -15,10 +15,14 @@ from serpar.errors import ConfigError
 from serpar.sim.mjcf_export import export_arm_mjcf
 from serpar.sim.model_file import read_model_file
 from serpar.sim.physics import PhysicsConfig
-from serpar.sim.plants.drive_friction import STRIBECK_SMOOTHING, DriveFriction, DriveFrictionLaw
+from serpar.sim.plants.drive_friction import (
+    STRIBECK_SMOOTHING,
+    DriveFriction,
+    DriveFrictionLaw,
+    gaz_sigmoid_params,
+)
 from serpar.tasks.episode import build_runtime
 from serpar.tasks.episode_config import EpisodeConfig
-from serpar.twins.cell_twin import sigmoid_params
 
 J = range(1, 8)
 
@@ -45,12 +49,12 @@ def test_a_diagnosed_sigmoid_is_the_cells_published_friction(tmp_path) -> None:
     the very torque the concealed cell's own Gaz form does, bit for bit; a joint friction in
     the model replaces the config's friction, the sigmoid still acts beside it."""
     speed = np.array([-0.5, -0.08, -0.01, 0.0, 0.02, 0.1, 0.7])
-    path = _model_file(tmp_path, {"sigmoid_friction": sigmoid_params(2.0)})
+    path = _model_file(tmp_path, {"sigmoid_friction": gaz_sigmoid_params(2.0)})
     truth = _drive_torque(EpisodeConfig(holes=1, arm_friction=2.0, arm_friction_form="gaz"), speed)
     fitted = _drive_torque(EpisodeConfig(holes=1, arm_friction=0.0, plant_model=str(path)), speed)
     np.testing.assert_array_equal(fitted, truth)
     assert truth[3] == 0 and np.all(truth[speed > 0.05] < 0) and np.all(truth[speed < -0.05] > 0)
-    both = _model_file(tmp_path, {"sigmoid_friction": sigmoid_params(2.0), "joint_friction": {
+    both = _model_file(tmp_path, {"sigmoid_friction": gaz_sigmoid_params(2.0), "joint_friction": {
         **{f"Fc{j}": 0.1 * j for j in J}, **{f"Fv{j}": 0.0 for j in J}}})
     rt, _ = build_runtime(EpisodeConfig(holes=1, arm_friction=2.0, arm_friction_form="gaz",
                                         plant_model=str(both)))
@@ -98,7 +102,7 @@ def test_a_stribeck_fall_and_rotor_inertia_act_on_the_cells_arm(tmp_path) -> Non
 
 
 def test_what_the_drive_cannot_take_is_reported_and_mjcf_says_what_it_cannot_hold(tmp_path) -> None:
-    params = sigmoid_params(1.0)
+    params = gaz_sigmoid_params(1.0)
     params.update(phi1_2=-0.3, phi2_3=500.0)
     path = _model_file(tmp_path, {"sigmoid_friction": params,
                                   "armature": {f"Ia{j}": 0.01 for j in J}})

@@ -43,7 +43,7 @@ from serpar.sim.arm import (
     build_arm_spec,
 )
 from serpar.sim.physics import PhysicsConfig
-from serpar.sim.plants.drive_friction import gaz_levels
+from serpar.sim.plants.drive_friction import gaz_levels, gaz_sigmoid_params
 from serpar.sim.strict_json import dumps
 from serpar.tasks.episode import HoleRecord, run_episode
 from serpar.tasks.episode_config import N_HOLES, EpisodeConfig
@@ -123,15 +123,6 @@ def _rotors(rng: np.random.Generator) -> dict[str, float]:
                        if j in ROTOR_JOINTS else 0.0) for j, n in enumerate(JOINT_NAMES, 1)}
 
 
-def sigmoid_params(scale: float) -> dict[str, float]:
-    """The cell's drive friction at ``scale`` x a real Panda's in ``sigmoid_friction``'s names:
-    phi1_j the swing (scaled), phi2_j, phi3_j Gaz et al.'s own."""
-    phi1, phi2, phi3 = GAZ_FRICTION_PHI
-    return {**{f"phi1_{j + 1}": scale * v for j, v in enumerate(phi1)},
-            **{f"phi2_{j + 1}": float(v) for j, v in enumerate(phi2)},
-            **{f"phi3_{j + 1}": float(v) for j, v in enumerate(phi3)}}
-
-
 def concealed_cell(effect: str, seed: int, holes: int
                    ) -> tuple[dict[str, object], dict[str, object], dict[str, object] | None]:
     """The concealed cell: its changes to the nominal episode config, its answer, and its arm
@@ -155,7 +146,7 @@ def concealed_cell(effect: str, seed: int, holes: int
                 "outside_form": {"form": "Gaz et al. 2019 sigmoid with offset",
                                  "offset_nm": [float(v) for v in offset],
                                  "transition_rad_s": [1.0 / p for p in GAZ_FRICTION_PHI[1]]},
-                "also": {"effect": "sigmoid_friction", "params": sigmoid_params(scale),
+                "also": {"effect": "sigmoid_friction", "params": gaz_sigmoid_params(scale),
                          "replaces": "the nominal cell's dry friction (arm_friction "
                                      f"{NOMINAL.arm_friction} x a Panda's Coulomb level)"}})
         elif name in ("sensor_timing", "latency"):

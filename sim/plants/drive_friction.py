@@ -68,6 +68,15 @@ def gaz_levels(scale: float = 1.0) -> tuple[Vec, Vec]:
     return level, level - scale * phi1 * expit(phi2 * phi3)
 
 
+def gaz_sigmoid_params(scale: float = 1.0) -> dict[str, float]:
+    """Gaz et al.'s friction at ``scale`` x a real Panda's in the diagnosis's
+    ``sigmoid_friction`` names: phi1_j the swing (scaled), phi2_j, phi3_j their own."""
+    phi1, phi2, phi3 = GAZ_FRICTION_PHI
+    return {**{f"phi1_{j + 1}": scale * v for j, v in enumerate(phi1)},
+            **{f"phi2_{j + 1}": float(v) for j, v in enumerate(phi2)},
+            **{f"phi3_{j + 1}": float(v) for j, v in enumerate(phi3)}}
+
+
 def _per_joint(name: str, values: tuple[float, ...], lo: float, hi: float) -> None:
     if len(values) != N_JOINTS or not all(math.isfinite(v) and lo <= v <= hi for v in values):
         raise ConfigError(f"drive friction {name} {tuple(values)}: {N_JOINTS} finite values in "
