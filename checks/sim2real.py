@@ -240,6 +240,15 @@ def write_updated(model: dict[str, object], out: Path) -> tuple[Path, MjcfExport
     return path, export_arm_mjcf(parse_model(model, str(path)), out / "updated.xml")
 
 
+def carried_words(diag: Diagnosis, model: dict[str, object]) -> str:
+    """What the updated model carries that is not established (one of an "A or B" pair: a
+    model must hold one of the two), with why, for the verdict ("" when nothing)."""
+    effects = model["effects"]
+    return "".join(f"; the updated model carries {f.effect}, not established: "
+                   f"{'; '.join(f.reasons)}" for f in diag.findings
+                   if not f.established and f.effect in effects)  # type: ignore[operator]
+
+
 def established(diag: Diagnosis, model: dict[str, object]) -> list[dict[str, object]]:
     """The established effects with their values in the updated model (a correction's value
     is the simulator's plus the correction) and the diagnosis's sigma."""

@@ -10,6 +10,7 @@ from pathlib import Path
 from serpar.checks.sim2real import (
     OutcomeDiff,
     bore_stage,
+    carried_words,
     compare,
     diagnose_cell,
     established,
@@ -135,7 +136,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:  # Ctrl-C: the finished reruns stay in OUT; no verdict
             return step.interrupted(args.json, real_dir=str(real), out=str(out))
     found = established(diag, model)
-    words = verdict(before, after, [str(f["effect"]) for f in found])
+    words = verdict(before, after, [str(f["effect"]) for f in found]) + carried_words(diag, model)
     if report is not None:
         write_sim2real_report(report, str(real), before, after, found, notes, words)
     if args.json:

@@ -36,6 +36,20 @@ def test_paired_difference_and_its_t_interval() -> None:
     assert compare(_holes([1.0]), _holes([1.0], "jam"))["seated"].diff == 0.0
 
 
+def test_the_verdict_says_which_of_an_a_or_b_pair_the_update_carries() -> None:
+    from types import SimpleNamespace
+
+    from serpar.checks.sim2real import carried_words
+    why = "payload or link_inertia (a link's mass): these data cannot tell; the model carries payload"
+    diag = SimpleNamespace(findings=(
+        SimpleNamespace(effect="latency", established=True, reasons=()),
+        SimpleNamespace(effect="payload", established=False, reasons=(why,)),
+        SimpleNamespace(effect="link_inertia", established=False, reasons=("pinned",))))
+    words = carried_words(diag, {"effects": ["latency", "payload"]})
+    assert words == f"; the updated model carries payload, not established: {why}"
+    assert carried_words(diag, {"effects": ["latency"]}) == ""
+
+
 def test_the_verdict_names_every_outcome_the_update_moved_further_from_the_cell() -> None:
     """An update that brings one outcome inside its CI and pushes another further away says
     both, the second with its figures and the effects the update carried."""
