@@ -51,6 +51,7 @@ from serpar.diagnosis.stability import (
     combined_std,
     fit_identified,
     folds,
+    release_held,
 )
 from serpar.diagnosis.units import in_units
 from serpar.errors import IdentificationError
@@ -165,6 +166,8 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
     if np.intersect1d(train, heldout).size:
         raise IdentificationError(f"{family.kind}: training and held-out rows overlap")
     path, scores, fixed = forward_select(family, train, heldout, cfg, report)
+    if fixed:
+        path[-1], fixed = release_held(family, path[-1], fixed, train, heldout, report)
     base, final = path[0], path[-1]
     effect_shares = shares(family, path, heldout)
     if report and splits and final.active:

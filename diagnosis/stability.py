@@ -139,6 +139,29 @@ def fit_identified(family: Family, active: tuple[str, ...], train: Rows, heldout
     return fit, fixed
 
 
+def release_held(family: Family, fit: Fit, fixed: Mapping[str, Effect], train: Rows,
+                 heldout: Rows, report: Callable[[str], None] | None = None
+                 ) -> tuple[Fit, dict[str, Effect]]:
+    """The selected model with each effect's held parameters freed again, one effect at a
+    time, started from the effect's own start values, and kept where the refit earns them
+    (:func:`earns`). A parameter held when its effect was added may be identified once later
+    effects explain what it stood beside: a joint's sigmoid friction pinned while the payload
+    was missing from the model stays at zero otherwise, and a viscous term stands in for it."""
+    fixed = dict(fixed)
+    for name in [n for n in fit.active if n in fixed]:
+        rest = {n: e for n, e in fixed.items() if n != name}
+        effect = block_of(family, fit.active, name, rest)
+        start = {k: np.array(v, float) for k, v in fit.params.items()}
+        held = list(fixed[name].fixed)
+        start[name][held] = np.clip(effect.x0[held], effect.lower[held], effect.upper[held])
+        if report:
+            report(f"{name}: its {len(held)} held parameter(s) freed again")
+        new, new_fixed = fit_identified(family, fit.active, train, heldout, start, rest)
+        if earns(fit, new)[2]:
+            fit, fixed = new, new_fixed
+    return fit, fixed
+
+
 def resample(family: Family, final: Fit, splits: list[tuple[Rows, Rows]],
              overrides: Mapping[str, Effect] | None = None,
              report: Callable[[str], None] | None = None) -> dict[str, Resampled]:

@@ -12,11 +12,10 @@ import numpy as np
 import pytest
 
 from serpar.errors import ConfigError
+from serpar.sim.arm import PANDA_COULOMB_FRICTION
 from serpar.sim.mjcf_export import export_arm_mjcf
 from serpar.sim.model_file import read_model_file
-from serpar.sim.physics import PhysicsConfig
 from serpar.sim.plants.drive_friction import (
-    STRIBECK_SMOOTHING,
     DriveFriction,
     DriveFrictionLaw,
     gaz_sigmoid_params,
@@ -63,36 +62,50 @@ def test_a_diagnosed_sigmoid_is_the_cells_published_friction(tmp_path) -> None:
     assert rt.drive is not None and len(rt.drive.law.sigmoids) == 1  # the config's gaz: replaced
 
 
+def _push_joint7(cfg: EpisodeConfig, torque: float, seconds: float = 0.2) -> float:
+    """Joint 7's travel [rad] under a constant torque, gravity and the motors off, from rest."""
+    rt, _ = build_runtime(cfg)
+    m, d = rt.scene.model, rt.scene.data
+    m.opt.gravity[:] = 0.0
+    d.ctrl[:] = 0.0
+    j7 = rt.scene.arm_dof_adr[6]
+    q0 = d.qpos[rt.scene.arm_qpos_adr[6]]
+    for _ in range(round(seconds / m.opt.timestep)):
+        if rt.drive is not None:
+            rt.drive(d)
+        d.qfrc_applied[j7] = torque
+        mujoco.mj_step(m, d)
+    return float(d.qpos[rt.scene.arm_qpos_adr[6]] - q0)
+
+
 def test_a_stribeck_fall_and_rotor_inertia_act_on_the_cells_arm(tmp_path) -> None:
+    """The fall is the joints' dry friction above its Coulomb level, as MuJoCo's frictionloss
+    at each substep's speed: a joint at rest holds up to Fs = Fc + dFs, and slides at Fc."""
     fall = np.array([0.2, 0.5, 0.3, 0.8, 0.1, 0.4, 0.6])
     vs = np.array([0.02, 0.05, 0.1, 0.03, 0.2, 0.04, 0.08])
     ia = np.array([0.0, 0.05, 0.0, -0.04, 0.0, 0.0, 0.02])
     path = _model_file(tmp_path, {
         "stribeck_friction": {**{f"dFs{j}": fall[j - 1] for j in J}, **{f"vs{j}": vs[j - 1] for j in J}},
         "armature": {f"Ia{j}": ia[j - 1] for j in J}})
-    cfg = EpisodeConfig(holes=1, arm_friction=0.0, plant_model=str(path))
+    cfg = EpisodeConfig(holes=1, plant_model=str(path))  # the nominal 0.3x Coulomb level beside
     rt, _ = build_runtime(cfg)
     m, d, dofs = rt.scene.model, rt.scene.data, rt.scene.arm_dof_adr
     np.testing.assert_allclose(m.dof_armature[dofs], 0.1 + ia, rtol=0, atol=1e-15)
     drive = rt.drive
-    assert drive is not None
-    # the smoothed sign is as narrow as the explicit step allows at the cell's longest step
-    assert np.all(drive.width >= STRIBECK_SMOOTHING) and np.all(drive.width < 0.1 * vs)
-    full = np.zeros((m.nv, m.nv))  # the explicit step's bound against each joint's inertia
-    data0 = mujoco.MjData(m)
-    mujoco.mj_forward(m, data0)
-    mujoco.mj_fullM(m, data0, full)
-    step = PhysicsConfig().longest_step
-    assert np.all((fall / drive.width) * step / np.diag(full)[dofs] <= 0.5 + 1e-12)
-    # at v = vs the drive loses dFs / e against the motion; far above vs, nothing; at rest, 0
-    np.testing.assert_allclose(_drive_torque(cfg, vs), -fall / np.e, rtol=1e-9)
-    np.testing.assert_allclose(_drive_torque(cfg, -vs), fall / np.e, rtol=1e-9)
-    assert np.all(np.abs(_drive_torque(cfg, 8 * vs)) < 1e-20)
-    assert np.all(_drive_torque(cfg, np.zeros(7)) == 0)
-    # the fall opposes the motion at the cell's longest step: joints thrown at 0.3 rad/s come
-    # back to the held pose
-    rt.transit, m.opt.timestep = None, PhysicsConfig().longest_step
-    rt.arm.substeps = rt.arm.config.substeps(m.opt.timestep)
+    assert drive is not None and drive.torque(vs).tolist() == [0.0] * 7  # no torque: a level
+    coulomb = 0.3 * np.array(PANDA_COULOMB_FRICTION)
+    np.testing.assert_allclose(drive.base_loss, coulomb)
+    np.testing.assert_allclose(drive.dry_level(np.zeros(7)), coulomb + fall)  # Fs at rest
+    np.testing.assert_allclose(drive.dry_level(-vs), coulomb + fall / np.e)
+    np.testing.assert_allclose(drive.dry_level(8 * vs), coulomb, rtol=1e-15)
+    d.qvel[dofs] = 8 * vs
+    drive(d)
+    np.testing.assert_allclose(m.dof_frictionloss[dofs], coulomb, rtol=1e-15)
+    # a push between the Coulomb and the static level: held with the fall, slides without it
+    push = coulomb[6] + 0.5 * fall[6]
+    assert abs(_push_joint7(cfg, push)) < 1e-4
+    assert abs(_push_joint7(EpisodeConfig(holes=1), push)) > 0.05
+    # the arm held by its controller, joints thrown at 0.3 rad/s: back and at rest
     held = d.qpos[rt.scene.arm_qpos_adr].copy()
     d.qvel[dofs] = 0.3
     for _ in range(300):

@@ -13,7 +13,7 @@ with; both sit beside the recording, never in it.
 | latency | commands act 0.5-2 ms late | MuJoCo actuator ``delay`` | delay [s] |
 | payload | 0.05-0.3 kg more hand than the nominal one (a camera, an adapter) | a body on the flange | mass, com_x/y/z |
 | contact_friction | journal/bore friction 0.1-0.5 (nominal 0.2) | the cell's precision-contact friction | d_mu = mu - 0.2 |
-| stribeck_friction | static friction above the Coulomb level on every joint: Fs - Fc 0.5-1.5x a real Panda's Coulomb level, vs 0.02-0.08 rad/s | a drive torque (sim/plants/drive_friction.py) beside the cell's dry friction | dFs<j>, vs<j> |
+| stribeck_friction | static friction above the Coulomb level on every joint: Fs - Fc 0.5-1.5x the nominal cell's Coulomb level (0.3x a real Panda's), vs 0.02-0.08 rad/s | the joints' dry friction level rising to Fs at rest (sim/plants/drive_friction.py) | dFs<j>, vs<j> |
 | armature | rotor inertia the MJCF lacks on joints 3-7: 0.3-1 x the nominal 0.1 kg m^2, +-50 % per joint | joint ``armature`` | Ia<j> |
 
 ``mix`` draws two to four of them: of the first five for seeds below
@@ -105,11 +105,12 @@ def _payload(rng: np.random.Generator) -> dict[str, float]:
 
 
 def _stribeck(rng: np.random.Generator) -> dict[str, float]:
-    """Fs - Fc on every joint, relative to a real Panda's Coulomb level, and each joint's vs
-    (log-uniform)."""
+    """Fs - Fc on every joint, relative to the nominal cell's Coulomb level (Fs / Fc 1.5-2.5,
+    the arm-dynamics twin's), and each joint's vs (log-uniform)."""
     ratio = rng.uniform(*RANGES["stribeck_friction"], N_JOINTS)
     speed = np.exp(rng.uniform(*np.log(STRIBECK_SPEED), N_JOINTS))
-    return {**{f"dFs{j + 1}": float(r * c) for j, (r, c) in enumerate(zip(ratio, PANDA_COULOMB_FRICTION))},
+    level = NOMINAL.arm_friction * np.asarray(PANDA_COULOMB_FRICTION)
+    return {**{f"dFs{j + 1}": float(r * c) for j, (r, c) in enumerate(zip(ratio, level))},
             **{f"vs{j + 1}": float(v) for j, v in enumerate(speed)}}
 
 

@@ -12,11 +12,14 @@ at rest: below ~1 / phi_2 rad/s it is a viscous-like slope, not a sticking dry f
 steepest slope, phi_1 phi_2 / 4 (<= 3.6 N m s/rad at 3x a real Panda's), is well below what
 the cell's steps integrate stably against the joints' inertia: explicit.
 
-The Stribeck fall dFs exp(-(v / vs)^2) sign(v) has a step at rest; it is smoothed as
-tanh(v / w), each joint's width w wide enough that the explicit step stays stable at the
-longest step the cell takes: w >= 2 dFs h / I (I the joint's inertia about its axis at the
-arm's home pose, armature included), and at least :data:`STRIBECK_SMOOTHING` (1 mm/s, the
-arm-dynamics twin's).
+The Stribeck fall dFs exp(-(v / vs)^2) against the motion is static friction above the
+Coulomb level: it is set as the joints' dry friction level, MuJoCo's ``frictionloss`` =
+Fc + dFs exp(-(v / vs)^2) at the speed of each substep's start, so the solver holds a joint
+at rest up to Fs = Fc + dFs and lets it slide at the Coulomb level once it moves. As an
+explicit torque it would need a smoothed sign whose slope at rest (dFs / width, hundreds of
+N m s/rad) drives the arm against the pads' stiff grip on a 1.7 g conductor: the cell's
+grasps blew up so. (The arm-dynamics twin, which grips nothing, keeps the smoothed torque:
+:func:`stribeck_fall_torque`.)
 """
 
 from __future__ import annotations
@@ -129,23 +132,25 @@ class DriveFrictionLaw:
 
 @dataclass
 class DriveFriction:
-    """Sets the arm's drive friction torque in ``qfrc_applied`` before each substep."""
+    """The arm's drive friction, set before each substep: the sigmoid as a torque in
+    ``qfrc_applied``, the Stribeck fall as the joints' dry friction level (``frictionloss``)."""
 
+    model: mujoco.MjModel
     dofs: NDArray[np.int64]
     law: DriveFrictionLaw
-    width: Vec
-    """Per joint the Stribeck sign's smoothing width [rad/s]."""
+    base_loss: Vec
+    """The joints' compiled ``frictionloss`` [N m]: the Coulomb level the fall rises above."""
 
     def __post_init__(self) -> None:
         self._phi = [tuple(np.asarray(p, float) for p in s) for s in self.law.sigmoids]
         self._excess = np.asarray(self.law.stribeck_excess, float)
-        self._speed = np.asarray(self.law.stribeck_speed, float)
+        self._inv_speed = 1.0 / np.asarray(self.law.stribeck_speed, float)
 
     @classmethod
     def of_arm(cls, model: mujoco.MjModel, prefix: str, law: DriveFrictionLaw,
                longest_step: float) -> DriveFriction:
         """The arm's drive friction; ``longest_step`` [s]: the longest physics step the cell
-        takes (its transit step), for the Stribeck sign's width."""
+        takes (its transit step), which the explicit sigmoid must stay stable at."""
         dofs = np.array([model.joint(prefix + n).dofadr[0] for n in JOINT_NAMES])
         data = mujoco.MjData(model)
         mujoco.mj_forward(model, data)
@@ -160,19 +165,25 @@ class DriveFriction:
                               f"{float(slope[j]):.3g} N m s/rad, is too steep for the cell's "
                               f"{longest_step * 1e3:g} ms step against {inertia[j]:.3g} kg m^2 "
                               "(valid: phi1 phi2 / 4 < inertia / step)")
-        width = np.full(len(dofs), STRIBECK_SMOOTHING)
-        if law.stribeck_excess:
-            width = np.maximum(width, 2.0 * np.asarray(law.stribeck_excess) * longest_step / inertia)
-        return cls(dofs, law, width)
+        return cls(model, dofs, law, model.dof_frictionloss[dofs].copy())
 
     def torque(self, dq: Vec) -> Vec:
-        """What the drives lose at joint speeds ``dq`` [N m]."""
+        """What the sigmoids take from the drives at joint speeds ``dq`` [N m]."""
         out = np.zeros(len(dq))
         for phi1, phi2, phi3 in self._phi:
             out += sigmoid_friction_torque(dq, phi1, phi2, phi3)
-        if self._excess.size:
-            out += stribeck_fall_torque(dq, self._excess, self._speed, self.width)
         return out
 
+    def dry_level(self, dq: Vec) -> Vec:
+        """The joints' dry friction level at speeds ``dq`` [N m]: Fc + dFs exp(-(dq/vs)^2)."""
+        if not self._excess.size:
+            return self.base_loss
+        x = dq * self._inv_speed
+        return self.base_loss + self._excess * np.exp(-x * x)
+
     def __call__(self, data: mujoco.MjData) -> None:
-        data.qfrc_applied[self.dofs] = -self.torque(data.qvel[self.dofs])
+        dq = data.qvel[self.dofs]
+        if self._phi:
+            data.qfrc_applied[self.dofs] = -self.torque(dq)
+        if self._excess.size:
+            self.model.dof_frictionloss[self.dofs] = self.dry_level(dq)
