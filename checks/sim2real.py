@@ -30,7 +30,7 @@ from serpar.diagnosis.config_model import model_from_config
 from serpar.diagnosis.prior import PriorFamily
 from serpar.diagnosis.result import Diagnosis
 from serpar.diagnosis.select import diagnose
-from serpar.diagnosis.task_outcomes import OUTCOMES, HoleOutcome, hole_outcomes
+from serpar.diagnosis.task_outcomes import OUTCOMES, RESOLUTION, HoleOutcome, hole_outcomes
 from serpar.errors import ConfigError
 from serpar.sim.mjcf_export import MjcfExport, export_arm_mjcf
 from serpar.sim.model_file import parse_model
@@ -71,6 +71,12 @@ class OutcomeDiff:
         if self.diff is None:
             return "-"
         return f"{self.diff:+.4g}" + (f" ± {self.ci:.3g}" if self.ci is not None else " (n < 2)")
+
+
+def beyond_ci(name: str, d: OutcomeDiff) -> bool:
+    """The difference is beyond its CI and beyond what the outcome is measured to."""
+    return (d.diff is not None and d.ci is not None
+            and abs(d.diff) > max(d.ci, RESOLUTION.get(name, 0.0)) + 1e-12)
 
 
 def real_episodes(real_dir: str | Path, seed: int = 0) -> list[RealEpisode]:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from serpar.checks.sim2real import (
     OutcomeDiff,
+    beyond_ci,
     bore_stage,
     carried_words,
     compare,
@@ -21,11 +22,13 @@ from serpar.checks.sim2real import (
     with_bore_friction,
     write_updated,
 )
+from serpar.checks.sim2real_confirm import confirmed_update
 from serpar.checks.sim2real_report import write_sim2real_report
 from serpar.cli import arg_types
 from serpar.cli.cmd_export_mjcf import export_summary
 from serpar.cli.out_paths import add_force, out_file, out_folder
 from serpar.cli.output import StageLines, print_json, table
+from serpar.diagnosis.config_model import model_from_config
 from serpar.diagnosis.task_outcomes import OUTCOMES, RESOLUTION
 from serpar.errors import ConfigError
 from serpar.sim.mjcf_export import is_mjcf_path, read_any_model
@@ -49,12 +52,6 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def _beyond(name: str, d: OutcomeDiff) -> bool:
-    """The difference is beyond its CI and beyond what the outcome is measured to."""
-    return (d.diff is not None and d.ci is not None
-            and abs(d.diff) > max(d.ci, RESOLUTION.get(name, 0.0)) + 1e-12)
-
-
 def further(before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff]) -> list[str]:
     """Outcomes the update moved further from the cell, beyond what they are measured to, with
     their differences before -> after."""
@@ -64,7 +61,7 @@ def further(before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff]) -> li
         if b is None or a is None or abs(a) <= abs(b) + RESOLUTION.get(n, 0.0):
             continue
         where = ("no CI from one hole" if after[n].ci is None
-                 else "now beyond its CI" if _beyond(n, after[n]) else "within its CI")
+                 else "now beyond its CI" if beyond_ci(n, after[n]) else "within its CI")
         out.append(f"{n} ({b:+.4g} -> {a:+.4g} {OUTCOMES[n]}, {where})")
     return out
 
@@ -73,7 +70,7 @@ def verdict(before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff],
             found: list[str] | None = None) -> str:
     """What the update did to the outcomes beyond their CIs, and every outcome it moved further
     from the cell, named with the effects the update added (``found``)."""
-    missed = [n for n in OUTCOMES if _beyond(n, before[n])]
+    missed = [n for n in OUTCOMES if beyond_ci(n, before[n])]
     away = further(before, after)
     worse = ("; further from the cell after the update: " + ", ".join(away)
              + f" (the update carries {', '.join(found or []) or 'no established effect'}: an "
@@ -86,7 +83,7 @@ def verdict(before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff],
         return ("the nominal simulator's outcomes agree with the real cell's within their CIs"
                 + worse)
     fixed = [n for n in missed if after[n].diff is not None
-             and abs(after[n].diff) < abs(before[n].diff) and not _beyond(n, after[n])]  # type: ignore[arg-type]
+             and abs(after[n].diff) < abs(before[n].diff) and not beyond_ci(n, after[n])]  # type: ignore[arg-type]
     still = [n for n in missed if n not in fixed]
     return (f"beyond the CI with the nominal simulator: {', '.join(missed)}; after the update "
             f"smaller and within the CI: {', '.join(fixed) or 'none'}"
@@ -129,14 +126,27 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
             notes += [bore_note] if bore_note else []
             model_path, exported = write_updated(model, out)
             contact = updated_contact_friction(model)
+            found = established(diag, model)
             step(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
                  "updated simulator on the same holes")
-            after = compare(real_outcomes, outcomes_of(rerun(episodes, out / "updated",
-                                                             str(model_path), contact, step)))
+            updated = rerun(episodes, out / "updated", str(model_path), contact, step)
+            after = compare(real_outcomes, outcomes_of(updated))
+            carried = [str(f["effect"]) for f in found] + (
+                ["contact_friction"] if bore.mu is not None and all(
+                    f["effect"] != "contact_friction" for f in found) else [])
+            model, after, checked = confirmed_update(
+                episodes, real_outcomes, before, after, updated, model,
+                model_from_config(nominal, start_model or "the nominal cell"), carried, out, step)
+            dropped = [c.effect for c in checked if not c.confirmed]
+            if dropped:
+                model_path, exported = write_updated(model, out)
+                contact = updated_contact_friction(model)
         except KeyboardInterrupt:  # Ctrl-C: the finished reruns stay in OUT; no verdict
             return step.interrupted(args.json, real_dir=str(real), out=str(out))
-    found = established(diag, model)
-    words = verdict(before, after, [str(f["effect"]) for f in found]) + carried_words(diag, model)
+    words = (verdict(before, after, [e for e in carried if e not in dropped])
+             + carried_words(diag, model)
+             + (f"; dropped after the rerun (the outcomes they move moved away from the cell): "
+                f"{', '.join(dropped)}" if dropped else ""))
     if report is not None:
         write_sim2real_report(report, str(real), before, after, found, notes, words)
     if args.json:
@@ -146,6 +156,8 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                     "established": found, "diagnosis_verdict": diag.verdict,
                     "not_identifiable": list(diag.not_identifiable),
                     "bore_friction": bore.as_dict(),
+                    "confirmed_by_rerun": [c.as_dict() for c in checked],
+                    "dropped_after_rerun": dropped,
                     "updated_model": str(model_path), "mjcf": export_summary(exported),
                     "contact_friction": contact, "further_after_update": further(before, after),
                     "verdict": words, "notes": notes,
@@ -159,6 +171,8 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     if diag.not_identifiable:
         print("not identifiable on these holes: " + "; ".join(diag.not_identifiable))
     print(bore.words())
+    for c in checked:
+        print(f"rerun check: {c.words()}")
     print(f"verdict: {words}")
     print(f"updated model: {model_path}   MJCF: {exported.path}"
           + (f"   report: {report}" if report else ""))

@@ -1,0 +1,65 @@
+"""An established effect stays in sim2real's update only where the rerun confirms it
+(checks/sim2real_confirm.py): synthetic holes whose truth is known."""
+
+from __future__ import annotations
+
+import pytest
+
+from serpar.checks.sim2real import OutcomeDiff
+from serpar.checks.sim2real_confirm import away_from_cell, judge, without_effect
+from serpar.diagnosis.task_outcomes import OUTCOMES, HoleOutcome
+from serpar.sim.model_file import DiagnosisModel, ParamBlock
+
+
+def _holes(**values: list[float]) -> list[HoleOutcome]:
+    n = len(next(iter(values.values())))
+    return [HoleOutcome(k, k, {**dict.fromkeys(OUTCOMES, 0.0), **{o: v[k] for o, v in values.items()}})
+            for k in range(n)]
+
+
+def _diffs(**given: tuple[float, float]) -> dict[str, OutcomeDiff]:
+    out = {n: OutcomeDiff(0.0, 0.01, 12, ()) for n in OUTCOMES}
+    out.update({n: OutcomeDiff(d, ci, 12, ()) for n, (d, ci) in given.items()})
+    return out
+
+
+def test_an_effect_that_moves_the_outcomes_toward_the_cell_is_confirmed() -> None:
+    before = _diffs(seated_depth=(0.25, 0.05), peak_axial_force=(0.4, 0.1))
+    real = _holes(seated_depth=[1.25, 1.26], peak_axial_force=[5.4, 5.5])
+    with_it = _holes(seated_depth=[1.249, 1.262], peak_axial_force=[5.41, 5.49])
+    without = _holes(seated_depth=[1.0, 1.0], peak_axial_force=[5.0, 5.0])
+    c = judge("payload", real, with_it, without, before)
+    assert c.confirmed and set(c.moves) == {"seated_depth", "peak_axial_force"}
+    assert c.moves["seated_depth"][0] < c.moves["seated_depth"][1]
+
+
+def test_an_effect_that_moves_them_away_is_dropped_and_one_that_moves_nothing_kept() -> None:
+    before = _diffs(misalignment_at_contact=(0.02, 0.01))
+    real = _holes(misalignment_at_contact=[0.05, 0.06])
+    c = judge("link_inertia", real, _holes(misalignment_at_contact=[0.01, 0.0]),
+              _holes(misalignment_at_contact=[0.03, 0.04]), before)
+    assert not c.confirmed and "dropped" in c.words()
+    same = _holes(misalignment_at_contact=[0.03, 0.04])
+    idle = judge("latency", real, same, same, before)
+    assert idle.confirmed and idle.moves == {} and "moves no outcome" in idle.words()
+
+
+def test_only_outcomes_moved_away_and_beyond_their_interval_call_for_a_check() -> None:
+    before = _diffs(seated_depth=(-0.070, 0.02), peak_axial_force=(0.40, 0.1))
+    after = _diffs(seated_depth=(-0.122, 0.02), peak_axial_force=(0.02, 0.1))
+    assert away_from_cell(before, after) == ["seated_depth"]
+    assert away_from_cell(before, _diffs(seated_depth=(-0.08, 0.2))) == []  # within its CI
+
+
+def test_a_correction_is_taken_back_to_the_prior_and_a_new_effect_out() -> None:
+    prior = DiagnosisModel("cell.yaml", "config", "arm_dynamics", ("joint_friction",), (
+        ("joint_friction", ParamBlock(("Fc1",), (0.1,), (0.0,))),))
+    model = {"effects": ["joint_friction", "payload"], "params": {
+        "joint_friction": {"values": [0.3], "std": [0.01], "names": ["Fc1"]},
+        "payload": {"values": [0.2], "std": [0.001], "names": ["mass"]}}}
+    back = without_effect(model, "joint_friction", prior)
+    assert back["effects"] == ["joint_friction", "payload"]
+    assert back["params"]["joint_friction"]["values"] == pytest.approx([0.1])
+    gone = without_effect(model, "payload", prior)
+    assert gone["effects"] == ["joint_friction"] and "payload" not in gone["params"]
+    assert model["effects"] == ["joint_friction", "payload"]  # the update itself is untouched
