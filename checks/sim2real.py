@@ -42,6 +42,8 @@ from serpar.tasks.run_episodes import recording_folder
 Tick = Callable[[str], None]
 NOMINAL_MU = PhysicsConfig().precision_friction
 MU_RANGE = BORE_MU_RANGE
+BORE_HOLES = 6
+"""Holes of each recording the bore-friction rerun takes (its first): half a 12-hole cell's."""
 MU_STEP_UP, MU_STEP_DOWN = 0.25, 0.1
 """The second mu a bore-friction rerun takes, above or below the nominal's (the concealed
 cells' range: 0.1-0.5)."""
@@ -197,8 +199,12 @@ def bore_stage(episodes: list[RealEpisode], real: list[HoleOutcome], nominal: li
     if mu1 is None:
         return BoreFriction(None, None, 0, (NOMINAL_MU, NOMINAL_MU), why,
                             agrees=why.startswith("the in-bore push agrees"))
-    step(f"the in-bore push differs from the simulator's: the holes again at mu {mu1:.3g}")
-    other = outcomes_of(rerun(episodes, out / "bore_mu", start_model, mu1, step))
+    # each recording's first holes: a rerun's prefix is those holes of the whole rerun
+    prefixes = [dataclasses.replace(e, config=dataclasses.replace(
+        e.config, holes=tuple(e.config.holes)[:BORE_HOLES])) for e in episodes]  # type: ignore[arg-type]
+    step(f"the in-bore push differs from the simulator's: the first {BORE_HOLES} holes again "
+         f"at mu {mu1:.3g}")
+    other = outcomes_of(rerun(prefixes, out / "bore_mu", start_model, mu1, step))
     return bore_friction(real, nominal, other, NOMINAL_MU, mu1)
 
 
