@@ -138,16 +138,17 @@ def rerun(episodes: list[RealEpisode], out: Path, plant_model: str | None,
 def compare(real: list[HoleOutcome], sim: list[HoleOutcome]) -> dict[str, OutcomeDiff]:
     """Per outcome the mean paired difference (real - sim) over the holes, with its 95 % CI."""
     by_hole = {(h.cycle, h.hole): h for h in sim}
-    out = {}
-    for name in OUTCOMES:
-        pairs = [r.values[name] - by_hole[(r.cycle, r.hole)].values[name] for r in real
-                 if (r.cycle, r.hole) in by_hole]
-        d = np.array([p for p in pairs if math.isfinite(p)])
-        mean = float(d.mean()) if d.size else None
-        ci = (float(stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / math.sqrt(d.size))
-              if d.size >= 2 else None)
-        out[name] = OutcomeDiff(mean, ci, int(d.size), tuple(float(x) for x in d))
-    return out
+    return {name: paired([r.values[name] - by_hole[(r.cycle, r.hole)].values[name] for r in real
+                          if (r.cycle, r.hole) in by_hole]) for name in OUTCOMES}
+
+
+def paired(pairs: list[float]) -> OutcomeDiff:
+    """The mean of per-hole differences (non-finite ones left out) and its 95 % t interval."""
+    d = np.array([p for p in pairs if math.isfinite(p)])
+    mean = float(d.mean()) if d.size else None
+    ci = (float(stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / math.sqrt(d.size))
+          if d.size >= 2 else None)
+    return OutcomeDiff(mean, ci, int(d.size), tuple(float(x) for x in d))
 
 
 def outcomes_of(folders: list[Path]) -> list[HoleOutcome]:
@@ -178,16 +179,15 @@ def bore_rerun_mu(real: list[HoleOutcome], nominal: list[HoleOutcome], mu0: floa
     real in-bore push against the simulator's at ``mu0``, paired per hole; where it agrees
     within its 95 % CI there is nothing to fit and no rerun is spent."""
     by_hole = {(h.cycle, h.hole): h.bore_axial for h in nominal if h.bore_axial is not None}
-    d = np.array([h.bore_axial[0] - by_hole[(h.cycle, h.hole)][0] for h in real
-                  if h.bore_axial is not None and (h.cycle, h.hole) in by_hole])
-    if d.size < 2:
-        return None, (f"{d.size} seated insertion(s) with an in-bore travel in both the cell and "
+    d = paired([h.bore_axial[0] - by_hole[(h.cycle, h.hole)][0] for h in real
+                if h.bore_axial is not None and (h.cycle, h.hole) in by_hole])
+    if d.diff is None or d.ci is None:
+        return None, (f"{d.n} seated insertion(s) with an in-bore travel in both the cell and "
                       "the simulator; 2 needed")
-    ci = float(stats.t.ppf(0.975, d.size - 1) * d.std(ddof=1) / math.sqrt(d.size))
-    if abs(d.mean()) <= ci:
+    if abs(d.diff) <= d.ci:
         return None, (f"the in-bore push agrees with the simulator's at mu {mu0:.3g} "
-                      f"({d.mean():+.3g} ± {ci:.2g} N over {d.size} holes): nothing to fit")
-    step = MU_STEP_UP if d.mean() > 0 else -min(MU_STEP_DOWN, mu0 - MU_RANGE[0])
+                      f"({d.diff:+.3g} ± {d.ci:.2g} N over {d.n} holes): nothing to fit")
+    step = MU_STEP_UP if d.diff > 0 else -min(MU_STEP_DOWN, mu0 - MU_RANGE[0])
     return mu0 + step, ""
 
 

@@ -105,7 +105,7 @@ class EpisodeInterrupted(KeyboardInterrupt):
 def build_runtime(cfg: EpisodeConfig) -> tuple[CellRuntime, PlateCommander]:
     scene: Scene = build_scene(scene_config(cfg))
     rt = CellRuntime.create(scene, controller_config(cfg.sensor_noise), seed=cfg.seed)
-    rt.drive = drive_friction(cfg, scene.model, scene.config.physics)
+    rt.drive = drive_friction(cfg, scene)
     plate = PlateCommander.create(scene.model, scene.data, scene.config.stewart, believed_errors(cfg))
     rt.observers.append(lambda r: plate.update(r.scene.data, r.time))
     return rt, plate

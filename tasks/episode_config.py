@@ -8,7 +8,6 @@ import enum
 import math
 from dataclasses import dataclass, field
 
-import mujoco
 import numpy as np
 
 from serpar.errors import ConfigError
@@ -20,7 +19,7 @@ from serpar.sim.physics import PhysicsConfig
 from serpar.sim.plants.arm_changes import ArmPlantChanges
 from serpar.sim.plants.drive_friction import MAX_SCALE, DriveFriction, DriveFrictionLaw
 from serpar.sim.plants.from_model_file import arm_plant_changes
-from serpar.sim.scene import SceneConfig
+from serpar.sim.scene import Scene, SceneConfig
 from serpar.sim.stewart import StewartConfig
 from serpar.sim.tolerances import DISTRIBUTIONS
 
@@ -190,19 +189,19 @@ def cell_log(cfg: EpisodeConfig) -> dict[str, object]:
             for k in CELL_LOG_KEYS}
 
 
-def drive_friction(cfg: EpisodeConfig, model: mujoco.MjModel, physics: PhysicsConfig
-                   ) -> DriveFriction | None:
+def drive_friction(cfg: EpisodeConfig, scene: Scene) -> DriveFriction | None:
     """The runtime's drive friction of an episode's arm, or None: the config's 'gaz' form
     (unless the plant model's joint friction replaces the config's friction, as in
-    :func:`scene_config`) plus the plant model's own drive friction (sigmoid, Stribeck);
-    ``physics``: the scene's (its longest step bounds the explicit torque's stiffness)."""
-    plant = arm_plant_of(cfg.plant_model)
+    :func:`scene_config`) plus the plant model's own drive friction (sigmoid, Stribeck), on
+    ``scene`` (built from :func:`scene_config`: its plant and its longest step)."""
+    plant = scene.config.arm_plant
     law = DriveFrictionLaw()
     if cfg.arm_friction_form == "gaz" and not (plant is not None and plant.frictionloss):
         law = DriveFrictionLaw.gaz(cfg.arm_friction)
     if plant is not None and plant.drive is not None:
         law = law.plus(plant.drive)
-    return DriveFriction.of_arm(model, names.ARM, law, physics.longest_step) if law else None
+    return (DriveFriction.of_arm(scene.model, names.ARM, law, scene.config.physics.longest_step)
+            if law else None)
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
