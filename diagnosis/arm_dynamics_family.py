@@ -271,11 +271,12 @@ class ArmDynamicsFamily:
 
 
 def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None,
-                          arm: ArmModel = PANDA_ARM) -> ArmDynamicsFamily:
+                          arm: ArmModel = PANDA_ARM, breaks_allowed: bool = False
+                          ) -> ArmDynamicsFamily:
     """The arm-dynamics family of `rec` for ``arm`` (IdentificationError names what the
-    recording lacks)."""
+    recording lacks); ``breaks_allowed`` as :func:`read_arm_series`'s."""
     cfg = cfg or ArmDynamicsConfig()
-    series = read_arm_series(rec, arm)
+    series = read_arm_series(rec, arm, breaks_allowed)
     dynamics = ArmDynamics(arm=arm)
     terms = compute_terms(series, cfg.smoothing, dynamics)
     drive_name = DRIVE_PREFIX if terms.drive_measured else "tau_J_d"

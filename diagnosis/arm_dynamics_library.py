@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_sigmoid import sigmoid_effect
+from serpar.diagnosis.arm_dynamics_signals import MAX_LATENCY_S
 from serpar.diagnosis.arm_dynamics_tilt import tilt_effect
 from serpar.diagnosis.family import Effect
 from serpar.sim.plants.arm_changes import EXTENT
@@ -177,7 +178,7 @@ def arm_effects(n: int, channels: Channels, offset_joints: tuple[int, ...],
         # a command cannot act before it is sent: 0 is a physical limit, and a fit that would
         # go below it says "no latency here", not an admissible finding
         out.append(Effect("latency", "actuation latency (command reaches the joint late)",
-                          ("delay",), ("s",), np.zeros(1), np.zeros(1), np.array([0.03]),
+                          ("delay",), ("s",), np.zeros(1), np.zeros(1), np.array([MAX_LATENCY_S]),
                           physical_lower=True))
     if channels.link:
         out.append(Effect("sensor_timing", "torque sensors sampled out of step with the "

@@ -20,6 +20,7 @@ of the commands k-1 and k.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,6 +48,9 @@ Q_MARGIN = 0.2
 calibration); farther out the recording is of another robot or in degrees."""
 MIN_ROWS = 40
 """Fewest comparison rows (windows) a recording must give."""
+MAX_LATENCY_S = 0.03
+"""[s] the longest actuation latency the diagnosis considers (the latency effect's bound); after
+a break rows keep this much more clear, as that effect reads the command this far back."""
 
 
 @dataclass(frozen=True)
@@ -86,6 +90,9 @@ class ArmSeries:
     nominal model; None when the recording does not log it."""
     drive_measured: bool = False
     """The drive channel is a measured drive torque (tau_drive), not a command (tau_J_d)."""
+    breaks: tuple[int, ...] = ()
+    """Samples that start a new stretch of the recording (the state restored before them):
+    no comparison window reaches across one."""
 
 
 def _column(rec: Recording, name: str) -> Vec:
@@ -136,10 +143,13 @@ def _joint_count(cols: set[str]) -> int:
     return k
 
 
-def read_arm_series(rec: Recording, arm: ArmModel = PANDA_ARM) -> ArmSeries:
+def read_arm_series(rec: Recording, arm: ArmModel = PANDA_ARM, breaks_allowed: bool = False
+                    ) -> ArmSeries:
     """The arm signals of `rec` for ``arm``, or IdentificationError naming what is wrong with
     them. noise_sigma must give q and the measured torques; tau_J_d's (the drive's torque
-    ripple about the command) defaults to tau_J's when the recording does not state it."""
+    ripple about the command) defaults to tau_J's when the recording does not state it.
+    ``breaks_allowed``: a gap of whole missed periods starts a new stretch (an episode's state
+    restore, tasks/episode_recorder.py) instead of being refused."""
     cols = set(rec.signals.column_names)
     n = arm.n
     q_names = ch.numbered("q", n)
@@ -157,9 +167,15 @@ def read_arm_series(rec: Recording, arm: ArmModel = PANDA_ARM) -> ArmSeries:
         bad = int(np.argmax(np.diff(t) <= 0)) + 1 if t.size >= 2 else 0
         raise IdentificationError(f"time must increase strictly (row {bad} repeats or goes back)")
     rate = float(rec.meta.sample_rate_hz)
-    dt = np.diff(t)
-    if np.max(np.abs(dt * rate - 1.0)) > RATE_TOLERANCE:
-        worst = int(np.argmax(np.abs(dt * rate - 1.0)))
+    ticks = np.diff(t) * rate
+    gap = (np.abs(ticks - np.round(ticks)) <= RATE_TOLERANCE) & (np.round(ticks) >= 2)
+    breaks = tuple(int(i) + 1 for i in np.flatnonzero(gap)) if breaks_allowed else ()
+    off = np.abs(ticks - 1.0) > RATE_TOLERANCE
+    if breaks_allowed:
+        off &= ~gap
+    if np.any(off):
+        dt = np.diff(t)
+        worst = int(np.argmax(np.where(off, np.abs(ticks - 1.0), -1.0)))
         raise IdentificationError(f"samples are not uniform at {rate:g} Hz (interval {dt[worst]:.6g} s "
                                   f"at row {worst + 1}); put them on the grid with `serpar import "
                                   f"FILE --rate {rate:g}` (jitter and missed ticks repaired, counted)")
@@ -194,7 +210,7 @@ def read_arm_series(rec: Recording, arm: ArmModel = PANDA_ARM) -> ArmSeries:
                                       "sensor's noise (> 0)")
     return ArmSeries(t, rate, q, tau, drive if measured else command, _sigmas(rec, q_names, None),
                      sigma_tau, sigma_drive, _load(rec, cols) if arm.is_panda else None,
-                     drive_measured=measured)
+                     drive_measured=measured, breaks=breaks)
 
 
 def _load(rec: Recording, cols: set[str]) -> Vec | None:
@@ -221,11 +237,17 @@ class Rows:
     kernel: Vec
 
     @classmethod
-    def of(cls, n_samples: int, cfg: SmoothingConfig) -> Rows:
+    def of(cls, n_samples: int, cfg: SmoothingConfig, breaks: tuple[int, ...] = (),
+           clear_after_break: int = 0) -> Rows:
+        """One row every window within each stretch between ``breaks``, the first of a stretch
+        after a break ``clear_after_break`` samples later than at the recording's start."""
         w = cfg.window
         # the full-rate model needs samples k-1..k+1 and the link sample's half-period shift
         first = w // 2 + 2
-        centre = np.arange(first, n_samples - w // 2 - 2, w, dtype=np.int64)
+        edges = [0, *breaks, n_samples]
+        centre = np.concatenate([
+            np.arange(lo + first + (clear_after_break if k else 0), hi - w // 2 - 2, w, dtype=np.int64)
+            for k, (lo, hi) in enumerate(itertools.pairwise(edges))])
         if centre.size < MIN_ROWS:
             raise IdentificationError(f"{n_samples} samples give {centre.size} windows of {w}; the "
                                       f"diagnosis needs >= {MIN_ROWS} (a recording of >= "

@@ -33,6 +33,7 @@ from scipy.ndimage import correlate1d
 
 from serpar.diagnosis.arm_dynamics_payload import load_torque
 from serpar.diagnosis.arm_dynamics_signals import (
+    MAX_LATENCY_S,
     ArmSeries,
     Rows,
     SmoothingConfig,
@@ -104,7 +105,8 @@ def compute_terms(series: ArmSeries, cfg: SmoothingConfig | None = None,
     """Channels, row noise and the state at every row, from the nominal model (or `dynamics`)."""
     cfg = cfg or SmoothingConfig()
     dyn = dynamics or ArmDynamics()
-    rows = Rows.of(len(series.time), cfg)
+    rows = Rows.of(len(series.time), cfg, series.breaks,
+                   int(np.ceil(MAX_LATENCY_S * series.rate)))
     v, a = full_rate_derivatives(series.q, series.rate)
     model = dyn.series(series.q, v, a)  # every sample: the model is linear in the raw q̈
     if series.load is not None:  # the load the controller was told of is nominal, not missing

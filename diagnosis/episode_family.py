@@ -269,6 +269,8 @@ def free_windows_by_phase(rec: Recording, inner: ArmDynamicsFamily
 
 def family_from_recording(rec: Recording, cfg: ArmDynamicsConfig | None = None) -> EpisodeFamily:
     """The episode family of ``rec`` (IdentificationError names what the recording lacks)."""
-    inner = dynamics_family(rec, cfg or ArmDynamicsConfig(tare_knot_s=TARE_KNOT_S))
+    # a state restore after a sim fault leaves a gap of one period (tasks/episode_recorder.py)
+    inner = dynamics_family(rec, cfg or ArmDynamicsConfig(tare_knot_s=TARE_KNOT_S),
+                            breaks_allowed=True)
     keep, excluded, phases = free_windows_by_phase(rec, inner)
     return EpisodeFamily(inner, keep, excluded, chamfer_slides(rec), phases)

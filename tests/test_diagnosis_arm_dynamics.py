@@ -414,3 +414,44 @@ def test_stribeck_friction_is_found_as_its_coulomb_level_and_its_fall() -> None:
     z = np.array([(p.value - truth[p.name]) / p.std for f in result.established
                   for p in f.params])
     assert z.size == 28 and np.mean(np.abs(z) <= 2.0) >= 0.9 and np.all(np.abs(z) <= 4.0), z
+
+
+# -- a state restore (an episode's broken hole cycle) ------------------------------------
+
+def _restored(rec: Recording, at: int, back: int) -> Recording:
+    """``rec`` with its state put back ``back`` samples at row ``at``, the way the episode
+    recorder writes a restore: the period spanning it left out, ``time`` going on."""
+    n = rec.signals.num_rows
+    idx = np.r_[np.arange(at), np.arange(at - back, n)]
+    cols = {c: pa.array(rec.signals.column(c).to_numpy()[idx]) for c in rec.signals.column_names}
+    t = rec.signals.column("time").to_numpy()
+    dt = t[1] - t[0]
+    cols["time"] = pa.array(t[0] + dt * np.r_[np.arange(at), at + 1 + np.arange(n - at + back)])
+    return Recording(rec.meta, pa.table(cols))
+
+
+def test_a_restore_starts_a_new_stretch_no_window_reaches_across() -> None:
+    """Allowed (an episode), a gap of whole periods is a break: every comparison window lies in
+    one stretch, and the twin's friction is named as on the unbroken recording. The state jumps
+    0.5 s back at the break, so a window across it would read a huge acceleration."""
+    at = 4000
+    broken = _restored(twin("joint_friction")[0], at, 500)
+    with pytest.raises(IdentificationError, match=r"not uniform at 1000 Hz \(interval 0.002 s"):
+        family_from_recording(broken)
+    fam = family_from_recording(broken, breaks_allowed=True)
+    rows = fam.terms.rows
+    lo, hi = rows.centre - rows.half - 2, rows.centre + rows.half + 2
+    assert not np.any((lo < at) & (hi >= at))
+    assert np.min(rows.centre[rows.centre > at]) - rows.half - at >= 30  # the latency's look back
+    result = diagnose(fam, seed=SEED)
+    assert result.top_effect == "joint_friction" and result.heldout_rms_after <= 1.5, result.verdict
+
+
+def test_a_gap_of_part_of_a_period_is_refused_even_where_breaks_are_allowed() -> None:
+    rec = twin(None)[0]
+    t = rec.signals.column("time").to_numpy().copy()
+    t[3000:] += 0.5 * (t[1] - t[0])
+    cols = {c: rec.signals.column(c) for c in rec.signals.column_names}
+    cols["time"] = pa.array(t)
+    with pytest.raises(IdentificationError, match=r"not uniform at 1000 Hz \(interval 0.0015 s at row 3000"):
+        family_from_recording(Recording(rec.meta, pa.table(cols)), breaks_allowed=True)
