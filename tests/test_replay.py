@@ -7,7 +7,6 @@ Chromium and finds each frame on the screen."""
 from __future__ import annotations
 
 import contextlib
-import shutil
 import signal
 import socket
 import subprocess
@@ -202,7 +201,9 @@ def test_the_viewer_listens_on_localhost_and_dies_with_serpar(rrd, sig):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(shutil.which("chromium") is None, reason="needs chromium (apt-get install chromium)")
+@pytest.mark.skipif(browser_replay.find_browser() is None,
+                    reason=f"needs a browser ({', '.join(browser_replay.BROWSERS)}); "
+                           ".ci/run installs Debian's chromium where none is found")
 def test_a_browser_shows_every_camera_frame(rrd, tmp_path):
     """Headless Chromium with software WebGL opens `serpar replay --web` as a user would; each
     camera's frame is found on the screen, with the spread of grey levels of the frame itself
