@@ -17,6 +17,7 @@ from serpar.cli import (
     cmd_diagnose,
     cmd_error_analysis,
     cmd_export_mjcf,
+    cmd_export_scene,
     cmd_import,
     cmd_montecarlo,
     cmd_replay,
@@ -192,6 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmd_error_analysis.register(sub)
     cmd_diagnose.register(sub)
     cmd_export_mjcf.register(sub)
+    cmd_export_scene.register(sub)
     cmd_sim2real.register(sub)
     cmd_twin.register(sub)
     cmd_blind_bench.register(sub)

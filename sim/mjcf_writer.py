@@ -155,7 +155,16 @@ def _resolve_files(root: ET.Element, spec: mujoco.MjSpec, out_dir: Path | None) 
             compiler.attrib.pop(attr, None)
 
 
+SITE_SIZE_DEFAULT = (0.005, 0.005, 0.005)
+"""What MJCF's parser gives a site's size components the file leaves out."""
+
+
 def _precise(el: ET.Element, sources: ElementSources, kept: list[str]) -> None:
+    if el.tag == "site" and "size" not in el.attrib:  # to_xml leaves out a size whose first
+        # component is the default; the parser would fill the rest with the default too
+        size = next(iter(sources.candidates("size")), None)
+        if size is not None and size.size == 3 and tuple(size) != SITE_SIZE_DEFAULT:
+            el.set("size", numbers(size))
     for attr, text in list(el.attrib.items()):
         written = _floats(text)
         if not written or attr in ("name", "class", "childclass"):
@@ -163,7 +172,10 @@ def _precise(el: ET.Element, sources: ElementSources, kept: list[str]) -> None:
         loose = sources.loose(attr)
         for candidate in sources.candidates(attr):
             if _prints_as(candidate, written, loose):
-                el.set(attr, numbers(candidate[:len(written)]))
+                # to_xml drops a site's trailing sizes, which the parser then fills with its
+                # default 0.005 rather than the spec's value: write them all
+                whole = el.tag == "site" and attr == "size"
+                el.set(attr, numbers(candidate if whole else candidate[:len(written)]))
                 break
         else:
             kept.append(f"{el.tag} {sources.label}.{attr}")
