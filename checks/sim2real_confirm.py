@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +32,7 @@ from serpar.checks.sim2real import (
     rerun,
     updated_contact_friction,
 )
+from serpar.diagnosis.result import Finding
 from serpar.diagnosis.task_outcomes import OUTCOMES, RESOLUTION, HoleOutcome
 from serpar.sim.model_file import DiagnosisModel
 
@@ -55,6 +57,18 @@ class Confirmation:
     def as_dict(self) -> dict[str, object]:
         return {"effect": self.effect, "confirmed": self.confirmed,
                 "moves": {n: {"with": w, "without": wo} for n, (w, wo) in self.moves.items()}}
+
+
+def to_confirm(established: Sequence[str], bore_mu: float | None, findings: Sequence[Finding],
+               carried: Sequence[str]) -> list[str]:
+    """What the rerun must bear out: the established effects, a bore friction the insertions
+    gave (not already established), and every finding the updated model ``carried`` without
+    establishing it (the one of an "A or B" pair a model must hold)."""
+    out = list(established)
+    if bore_mu is not None and "contact_friction" not in out:
+        out.append("contact_friction")
+    return out + [f.effect for f in findings
+                  if not f.established and f.effect in carried and f.effect not in out]
 
 
 def without_effect(model: dict[str, object], name: str, prior: DiagnosisModel) -> dict[str, object]:

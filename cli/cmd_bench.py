@@ -50,7 +50,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     report = run_bench(cfg, tick)
     if args.episode:
 
-        report["episode"] = episode_bench(tick=tick)
+        floor = report["bare"]["cell_36_conductors"]["steps_per_s"]  # type: ignore[index]
+        report["episode"] = episode_bench(tick=tick, bare_steps_per_s=float(floor))
     if args.montecarlo:
         report["montecarlo"] = montecarlo_bench(threads=threads, tick=tick)
     if args.diagnose:
@@ -79,6 +80,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
         c, w = e["hole_cycle"], e["two_episodes_of_one_hole"]
         print(table(["assembly task", "wall s", "simulated s", "x real time"], [
             ["one hole cycle (mean)", f"{c['wall_s']:.1f}", f"{c['sim_s']:.2f}", f"{c['realtime_factor']:.2f}"],
+            [(f"  of it in mj_step ({c['physics_steps']:,.0f} steps; at the bare rate "
+             f"{c['steps_at_bare_rate_s']:.1f} s)"), f"{c['physics_wall_s']:.1f}", "",
+             f"wall / physics {c['wall_over_physics']:.2f}"],
             ["episode set-up (scene, settle, registration)", f"{e['episode_setup_wall_s']:.1f}", "", ""],
             ["36-hole episode, estimated", f"{e['episode_36_holes_estimated_wall_s']:.0f}", "", ""],
             ["2 one-hole episodes, 1 worker", f"{w['workers_1_s']:.1f}", "", ""],

@@ -137,6 +137,10 @@ def print_summary(summary) -> None:
     if summary.holes:
         print(f"cycle time (simulated) mean {ct['mean']:.2f} s, max {ct['max']:.2f} s; "
               f"peak contact force mean {pf['mean']:.2f} N, max {pf['max']:.2f} N")
+    if summary.wall_s:
+        print(f"wall time {summary.wall_s:.1f} s, of which in MuJoCo's steps "
+              f"{summary.physics_wall_s:.1f} s; setting up (before the first hole) "
+              f"{summary.setup_wall_s:.1f} s")
     if summary.interrupted:
         print(interrupted_words(summary.interrupted))
     if summary.sim_faults:

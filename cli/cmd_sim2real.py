@@ -22,7 +22,7 @@ from serpar.checks.sim2real import (
     with_bore_friction,
     write_updated,
 )
-from serpar.checks.sim2real_confirm import confirmed_update
+from serpar.checks.sim2real_confirm import confirmed_update, to_confirm
 from serpar.checks.sim2real_report import write_sim2real_report
 from serpar.cli import arg_types
 from serpar.cli.cmd_export_mjcf import export_summary
@@ -131,9 +131,8 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                  "updated simulator on the same holes")
             updated = rerun(episodes, out / "updated", str(model_path), contact, step)
             after = compare(real_outcomes, outcomes_of(updated))
-            carried = [str(f["effect"]) for f in found] + (
-                ["contact_friction"] if bore.mu is not None and all(
-                    f["effect"] != "contact_friction" for f in found) else [])
+            carried = to_confirm([str(f["effect"]) for f in found], bore.mu, diag.findings,
+                                 model["effects"])  # type: ignore[arg-type]
             model, after, checked = confirmed_update(
                 episodes, real_outcomes, before, after, updated, model,
                 model_from_config(nominal, start_model or "the nominal cell"), carried, out, step)

@@ -32,6 +32,7 @@ MAX_SPEED = 100.0
 GATE_EVERY = 5
 """Control periods between two decisions of the collision gate (sim/collision_gate.py): one
 decision costs ~55 us of numpy, and its margin grows with what moved since the last one."""
+STEP_TIMER = int(mujoco.mjtTimer.mjTIMER_STEP)
 GATED_BODIES = (names.PLATE + "baseplate", names.TRAY + "tray")
 
 
@@ -106,6 +107,12 @@ class CellRuntime:
     drive: DriveFriction | None = None
     """Drive friction MuJoCo has no element for (the published Panda form), set before every
     substep; None: the arm's friction is its joints' own (``frictionloss``)."""
+    physics_wall_s: float = 0.0
+    """Wall time spent inside ``mj_step`` over the runtime's control periods [s]: MuJoCo's
+    own step timer (``data.timer[mjTIMER_STEP]``) read around each period's substeps, the
+    differences summed (a reset or a recompile zeroes the timer, never inside a period)."""
+    physics_steps: int = 0
+    """The ``mj_step`` calls those were (the timer's count)."""
     _warnings: int = 0
     _adc: TorqueADC | None = None
     _adcs: dict[int, TorqueADC] = field(default_factory=dict)
@@ -184,6 +191,8 @@ class CellRuntime:
         # switches gets the mean of the old and new command, which centres the switch on t_k.
         d.ctrl[motors] = 0.5 * (held + new)
         probe, adc, drive = self.substep_probe, self._adc, self.drive
+        timer = d.timer[STEP_TIMER]
+        physics_before, steps_before = timer.duration, timer.number
         for s in range(self.arm.substeps):
             if drive is not None:
                 drive(d)
@@ -193,6 +202,8 @@ class CellRuntime:
                 probe()
             if s == 0:  # after the switch substep: the command alone
                 d.ctrl[motors] = new
+        self.physics_wall_s += timer.duration - physics_before
+        self.physics_steps += timer.number - steps_before
         if adc.reads_period_end:
             # drives that act late put a switch inside the period; the torque at its end is one
             # the next command does not touch yet (the trajectory is unchanged by this forward)

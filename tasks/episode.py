@@ -64,6 +64,10 @@ class HoleRecord:
     """The cycle ended because the integration broke down (see reason)."""
     phase_s: dict[str, float] = dataclasses.field(default_factory=dict)
     """Simulated seconds per phase (locate, grasp, inspect, align, insert, release)."""
+    physics_wall_s: float = 0.0
+    """Wall time of the cycle's ``mj_step`` calls (MuJoCo's step timer) [s]."""
+    physics_steps: int = 0
+    """How many ``mj_step`` calls the cycle made."""
 
     def as_dict(self) -> dict[str, object]:
         return {"kind": "hole", **dataclasses.asdict(self)}
@@ -80,6 +84,10 @@ class EpisodeSummary:
     wall_s: float
     complete: bool = True
     """False: the episode was interrupted before its last hole ended."""
+    physics_wall_s: float = 0.0
+    """Wall time of the episode's ``mj_step`` calls (MuJoCo's step timer) [s]."""
+    setup_wall_s: float = 0.0
+    """Wall time before the first hole cycle: the cell built, settled, the platform registered."""
 
     def as_dict(self) -> dict[str, object]:
         return {"kind": "episode", **dataclasses.asdict(self)}
@@ -168,13 +176,16 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
     counts = {o.value: 0 for o in Outcome}
     n = cfg.holes if isinstance(cfg.holes, int) else len(cfg.holes)
     done, current = 0, None  # holes finished; the cycle under way
+    setup, physics0 = float("nan"), rt.physics_wall_s  # a runtime given may have run before
     try:
         rt.run(SETTLE_S)
         cycle.register_platform()
+        setup = time.perf_counter() - t_wall
         for k in range(n):
             current = k
             wanted = None if isinstance(cfg.holes, int) else cfg.holes[k]
             snap, t0, w0 = _Snapshot(rt, plate), rt.time, time.perf_counter()
+            p0, n0 = rt.physics_wall_s, rt.physics_steps
             broken = False
             try:
                 result = cycle.run(wanted)
@@ -188,7 +199,8 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
                                 result.reason, result.peak_force_n, result.lateral_misalignment_mm,
                                 result.insertion_time_s, result.depth_shortfall_mm, result.clearance_um,
                                 rt.time - t0, time.perf_counter() - w0, broken,
-                                cycle.phase_durations(rt.time))
+                                cycle.phase_durations(rt.time), rt.physics_wall_s - p0,
+                                rt.physics_steps - n0)
             if recorder is not None:  # before a restore turns the clock back
                 recorder.note(f"hole {record.hole}: {record.outcome} ({record.reason})")
             if broken:
@@ -209,7 +221,8 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
         if recorder is not None:
             recorder.ended = {"interrupted": where}
         partial = EpisodeSummary(cfg.seed, done, counts["success"], counts, rt.time,
-                                 time.perf_counter() - t_wall, complete=False)
+                                 time.perf_counter() - t_wall, complete=False,
+                                 physics_wall_s=rt.physics_wall_s - physics0, setup_wall_s=setup)
         raise EpisodeInterrupted(where, partial) from None
     except BaseException as exc:
         if recorder is not None:
@@ -222,4 +235,5 @@ def run_episode(cfg: EpisodeConfig, pairs: dict[str, StereoPair],
         if recorder is not None:  # also after an error: the recording shows how it got there
             rt.observers.remove(recorder)
             recorder.close()
-    return EpisodeSummary(cfg.seed, n, counts["success"], counts, rt.time, time.perf_counter() - t_wall)
+    return EpisodeSummary(cfg.seed, n, counts["success"], counts, rt.time, time.perf_counter() - t_wall,
+                          physics_wall_s=rt.physics_wall_s - physics0, setup_wall_s=setup)

@@ -188,6 +188,12 @@ class RunSummary:
     """Episodes counted in `episodes` that were interrupted before their last hole."""
     interrupted: dict[str, object] | None = None
     """The run's "interrupted" record (without its kind), None for a run that was not."""
+    wall_s: float = 0.0
+    """Wall time of the episodes, summed (their workers' own clocks) [s]."""
+    physics_wall_s: float = 0.0
+    """Of it, inside ``mj_step`` (MuJoCo's step timer) [s]."""
+    setup_wall_s: float = 0.0
+    """Of it, before each episode's first hole cycle (building, settling, registering) [s]."""
 
     def as_dict(self) -> dict[str, object]:
         return {"kind": "summary", **dataclasses.asdict(self)}
@@ -216,4 +222,11 @@ def summarise(records: Sequence[Record]) -> RunSummary:
         peak_force_n=_stats([float(r["peak_force_n"]) for r in holes]),
         errors=sum(r["kind"] == "error" for r in records),
         partial_episodes=sum(r["kind"] == "episode" and r.get("complete") is False for r in records),
-        interrupted=stop[-1] if stop else None)
+        interrupted=stop[-1] if stop else None,
+        **{k: _total(records, k) for k in ("wall_s", "physics_wall_s", "setup_wall_s")})
+
+
+def _total(records: Sequence[Record], key: str) -> float:
+    """``key`` summed over the episode records that state it (NaN: an episode stopped before)."""
+    values = (r.get(key) for r in records if r["kind"] == "episode")
+    return math.fsum(float(v) for v in values if v is not None and not math.isnan(float(v)))

@@ -51,6 +51,18 @@ def test_phases_are_timed(one_hole):
     assert math.isclose(sum(r.phase_s.values()), r.cycle_time_s, abs_tol=2e-3)
 
 
+def test_the_physics_time_is_measured_by_mujocos_step_timer(one_hole):
+    """Every step of the cycle is counted: between a step of 0.25 ms (transit) and 0.1 ms
+    (fine) per simulated 0.1 ms, and their wall time inside the cycle's and the episode's."""
+    summary, (r,) = one_hole
+    assert r.cycle_time_s / 2.5e-4 < r.physics_steps <= r.cycle_time_s / 1e-4 + 1
+    assert 0 < r.physics_wall_s < r.wall_s
+    assert r.physics_wall_s < summary.physics_wall_s < summary.wall_s
+    assert 0 < summary.setup_wall_s < summary.wall_s - r.wall_s + 1e-6
+    per_step = r.physics_wall_s / r.physics_steps
+    assert 5e-6 < per_step < 1e-3  # a step of the full cell: tens of microseconds
+
+
 def test_one_bad_episode_does_not_end_the_run(monkeypatch):
     import serpar.tasks.run_episodes as runner
 

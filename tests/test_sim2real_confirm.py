@@ -6,7 +6,8 @@ from __future__ import annotations
 import pytest
 
 from serpar.checks.sim2real import OutcomeDiff
-from serpar.checks.sim2real_confirm import away_from_cell, judge, without_effect
+from serpar.checks.sim2real_confirm import away_from_cell, judge, to_confirm, without_effect
+from serpar.diagnosis.result import Finding
 from serpar.diagnosis.task_outcomes import OUTCOMES, HoleOutcome
 from serpar.sim.model_file import DiagnosisModel, ParamBlock
 
@@ -63,3 +64,16 @@ def test_a_correction_is_taken_back_to_the_prior_and_a_new_effect_out() -> None:
     gone = without_effect(model, "payload", prior)
     assert gone["effects"] == ["joint_friction"] and "payload" not in gone["params"]
     assert model["effects"] == ["joint_friction", "payload"]  # the update itself is untouched
+
+
+def test_the_carried_one_of_an_a_or_b_pair_is_confirmed_too() -> None:
+    """The update carries a payload it could not tell from the last link's mass: the rerun must
+    bear it out like an established effect; a suspected effect the model does not carry is not
+    rerun, nor is the bore's friction twice."""
+    payload = Finding(2, "payload", "", (), 0.3, -10.0, 10.0, established=False,
+                      reasons=("payload or link_inertia: these data cannot tell",))
+    link = Finding(3, "link_inertia", "", (), 0.1, -5.0, 5.0, established=False)
+    latency = Finding(1, "latency", "", (), 0.5, -20.0, 20.0)
+    assert to_confirm(["latency"], 0.41, [latency, payload, link], ["latency", "payload"]) == \
+        ["latency", "contact_friction", "payload"]
+    assert to_confirm(["contact_friction"], 0.41, [payload], []) == ["contact_friction"]
