@@ -142,6 +142,9 @@ class _Snapshot:
         rt.time = self.time
         plate.reset_to(self.commanded)
         rt.arm.hold_joints(d.qpos[rt.scene.arm_qpos_adr].copy())
+        # read the restored arm: the next move starts from the measured pose, which would
+        # otherwise be the broken cycle's last (a jump the arm answers at its torque limits)
+        rt.arm.update(m, d)
         rt.gripper.width_target, rt.gripper.squeeze = self.gripper
         rt.set_load(*self.load)
 
