@@ -41,11 +41,13 @@ from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.findings import excess, findings_of, param_estimates, shares, verdict
 from serpar.diagnosis.fit import Fit, earns, fit_model
 from serpar.diagnosis.locate import chi2_p
+from serpar.diagnosis.reselect import barred_reason, passed_over
 from serpar.diagnosis.residual import ResidualCheck, check_residual
-from serpar.diagnosis.result import CandidateScore, Diagnosis
+from serpar.diagnosis.result import CandidateScore, Diagnosis, Finding
 from serpar.diagnosis.rivals import rivals
 from serpar.diagnosis.stability import (
     N_FOLDS,
+    Assessment,
     assess,
     block_of,
     combined_std,
@@ -97,11 +99,13 @@ def beyond_noise(family: Family, fit: Fit, heldout: np.ndarray, alpha: float) ->
 
 
 def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
-                   cfg: SelectConfig, report: Progress | None = None
+                   cfg: SelectConfig, report: Progress | None = None,
+                   barred: frozenset[str] = frozenset()
                    ) -> tuple[list[Fit], list[CandidateScore], dict[str, Effect]]:
     """The sequence of fits (baseline first, then one added effect per step), the score of
     every candidate tried at every step, and the selected effects with the parameters the
-    data do not identify held at zero (:func:`~serpar.diagnosis.stability.fit_identified`)."""
+    data do not identify held at zero (:func:`~serpar.diagnosis.stability.fit_identified`);
+    ``barred`` effects are not tried."""
     say = report or (lambda _msg: None)
     say("baseline")
     path = [fit_model(family, (), train, heldout)]
@@ -112,7 +116,8 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
         step += 1
         current = path[-1]
         best: tuple[Fit, dict[str, Effect], float] | None = None
-        tried = [e for e in family.effects if e.name not in current.active]
+        tried = [e for e in family.effects if e.name not in current.active
+                 and e.name not in barred]
         held = ", ".join(current.active) or "nothing yet"
         for k, effect in enumerate(tried):
             say(f"step {step} (holding {held}): candidate {k + 1} of {len(tried)}, {effect.name}")
@@ -165,16 +170,22 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
                                   f"{heldout.size} held-out rows; both must be non-empty")
     if np.intersect1d(train, heldout).size:
         raise IdentificationError(f"{family.kind}: training and held-out rows overlap")
-    path, scores, fixed = forward_select(family, train, heldout, cfg, report)
-    if fixed:
-        path[-1], fixed = release_held(family, path[-1], fixed, train, heldout, report)
-    base, final = path[0], path[-1]
-    effect_shares = shares(family, path, heldout)
-    if report and splits and final.active:
-        report(f"resampling {len(splits)} folds")
-    # the model (and the file written from it) holds the established effects only
-    kept, assessed, fixed = assess(family, final, {n: s[1] for n, s in effect_shares.items()}, splits,
-                                   train, heldout, fixed, report)
+    sel = _select(family, train, heldout, splits, cfg, report)
+    failed = [n for n in sel.path[-1].active if n not in sel.kept.active]
+    barred = passed_over(sel.path[-1].active, sel.scores, failed)
+    set_aside: list[Finding] = []
+    if barred:
+        if report:
+            report(f"selecting again without {', '.join(barred)}")
+        again = _select(family, train, heldout, splits, cfg, report, frozenset(barred))
+        if again.kept.heldout_rms < sel.kept.heldout_rms:
+            first = findings_of(family, sel.path, sel.shares, sel.assessed, sel.fixed, sel.kept, {})
+            set_aside = [replace(f, established=False,
+                                 reasons=f.reasons + (barred_reason(f.effect, barred[f.effect]),))
+                         for f in first if f.effect in barred]
+            sel = again
+    path, scores, fixed, effect_shares = sel.path, sel.scores, sel.fixed, sel.shares
+    base, kept, assessed = path[0], sel.kept, sel.assessed
     demoted: dict[str, tuple[str, ...]] = {}
     every = np.concatenate([train, heldout])
     before = family.residual(base.params, heldout)
@@ -231,6 +242,7 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
     estimate = (fit_model(family, kept.active, np.sort(every), np.zeros(0, np.int64),
                           kept.params, fixed) if adequate else kept)
     found = findings_of(family, path, effect_shares, assessed, fixed, estimate, demoted)
+    found += [replace(f, rank=len(found) + k) for k, f in enumerate(set_aside, start=1)]
     # quiet only if no part of the data is beyond noise: the rule selection stops by
     quiet = not beyond_noise(family, base, heldout, cfg.alpha)
     words = verdict(found, quiet, residual.words, empirical)
@@ -258,6 +270,33 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
         empirical=empirical, physical=in_units(family, heldout, before, after),
         not_identifiable=tuple(f"{name} ({why})" for name, why in
                                (getattr(family, "not_identifiable", None) or {}).items()))
+
+
+@dataclass(frozen=True)
+class _Selection:
+    path: list[Fit]
+    scores: list[CandidateScore]
+    fixed: dict[str, Effect]
+    shares: dict[str, tuple[float, float]]
+    kept: Fit
+    """The established effects' model."""
+    assessed: dict[str, Assessment]
+
+
+def _select(family: Family, train: np.ndarray, heldout: np.ndarray,
+            splits: list[tuple[np.ndarray, np.ndarray]], cfg: SelectConfig,
+            report: Progress | None, barred: frozenset[str] = frozenset()) -> _Selection:
+    """Forward selection, held parameters released, every selected effect judged."""
+    path, scores, fixed = forward_select(family, train, heldout, cfg, report, barred)
+    if fixed:
+        path[-1], fixed = release_held(family, path[-1], fixed, train, heldout, report)
+    effect_shares = shares(family, path, heldout)
+    if report and splits and path[-1].active:
+        report(f"resampling {len(splits)} folds")
+    # the model (and the file written from it) holds the established effects only
+    kept, assessed, fixed = assess(family, path[-1], {n: s[1] for n, s in effect_shares.items()},
+                                   splits, train, heldout, fixed, report)
+    return _Selection(path, scores, fixed, effect_shares, kept, assessed)
 
 
 NOISE_EXPLAINED = 0.8
