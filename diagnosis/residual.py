@@ -15,11 +15,12 @@ Without an estimate the words say that these data cannot tell the two apart.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
+from serpar.diagnosis.empirical_term import EmpiricalTerm
 from serpar.diagnosis.family import Family
 from serpar.diagnosis.locate import chi2_p
 
@@ -94,3 +95,21 @@ def check_residual(family: Family, rows: NDArray[np.int64], whitened: NDArray[np
         words = (f"a structured residual remains: {rms:.2g} x the stated sigma where the data's "
                  f"own noise ({method}) is {ratio:.2g} x; physics that no candidate explains")
     return ResidualCheck(rms, p, passes, ratio, method, structured, words)
+
+
+NOISE_EXPLAINED = 0.8
+"""An empirical term that takes a noise-like residual's held-out RMS below this share of it
+shows structure: a stated sigma too small by a factor cannot be fitted away on held-out data."""
+
+
+def noise_like_but_explained(residual: ResidualCheck, empirical: EmpiricalTerm
+                             ) -> tuple[ResidualCheck, EmpiricalTerm | None]:
+    """A residual the noise estimate called noise: structure after all when an empirical term
+    explains a material part of it (the estimate was inflated by it); else noise, no term."""
+    if not empirical.terms or empirical.heldout_rms_after >= NOISE_EXPLAINED * residual.rms:
+        return residual, None
+    words = (f"a structured residual remains: {residual.rms:.2g} x the stated sigma; the data's "
+             f"own noise estimate ({residual.noise_method}: {residual.noise_ratio:.2g} x) "
+             "is inflated by it, since an empirical term removes part of it on held-out data; "
+             "physics that no candidate explains")
+    return replace(residual, structured=True, words=words), empirical

@@ -35,14 +35,14 @@ import numpy as np
 import scipy.stats
 from threadpoolctl import threadpool_limits
 
-from serpar.diagnosis.empirical import EmpiricalTerm, characterise
+from serpar.diagnosis.empirical import characterise
 from serpar.diagnosis.empirical_refit import model_refit, outweighed
 from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.findings import excess, findings_of, param_estimates, shares, verdict
 from serpar.diagnosis.fit import Fit, earns, fit_model
 from serpar.diagnosis.locate import chi2_p
 from serpar.diagnosis.reselect import barred_reason, passed_over
-from serpar.diagnosis.residual import ResidualCheck, check_residual
+from serpar.diagnosis.residual import check_residual, noise_like_but_explained
 from serpar.diagnosis.result import CandidateScore, Diagnosis, Finding
 from serpar.diagnosis.rivals import rivals
 from serpar.diagnosis.stability import (
@@ -297,21 +297,3 @@ def _select(family: Family, train: np.ndarray, heldout: np.ndarray,
     kept, assessed, fixed = assess(family, path[-1], {n: s[1] for n, s in effect_shares.items()},
                                    splits, train, heldout, fixed, report)
     return _Selection(path, scores, fixed, effect_shares, kept, assessed)
-
-
-NOISE_EXPLAINED = 0.8
-"""An empirical term that takes a noise-like residual's held-out RMS below this share of it
-shows structure: a stated sigma too small by a factor cannot be fitted away on held-out data."""
-
-
-def noise_like_but_explained(residual: ResidualCheck, empirical: EmpiricalTerm
-                             ) -> tuple[ResidualCheck, EmpiricalTerm | None]:
-    """A residual the noise estimate called noise: structure after all when an empirical term
-    explains a material part of it (the estimate was inflated by it); else noise, no term."""
-    if not empirical.terms or empirical.heldout_rms_after >= NOISE_EXPLAINED * residual.rms:
-        return residual, None
-    words = (f"a structured residual remains: {residual.rms:.2g} x the stated sigma; the data's "
-             f"own noise estimate ({residual.noise_method}: {residual.noise_ratio:.2g} x) "
-             "is inflated by it, since an empirical term removes part of it on held-out data; "
-             "physics that no candidate explains")
-    return replace(residual, structured=True, words=words), empirical

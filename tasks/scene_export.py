@@ -14,7 +14,6 @@ into the plate, and drive friction that has no MJCF form (sim/mjcf_notes.py).
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,7 +21,7 @@ import mujoco
 
 from serpar.sim.mjcf_notes import NO_MJCF_FORM
 from serpar.sim.mjcf_writer import MjcfExport, differences, write_export
-from serpar.sim.scene import build_scene
+from serpar.sim.scene import Scene, build_scene
 from serpar.tasks.episode_config import EpisodeConfig, drive_friction, scene_config
 
 HOME_KEY = "home"
@@ -47,8 +46,8 @@ class SceneExport:
     keyframe's (empty: the file is the cell's model plus ``home``)."""
 
 
-def _drive_lines(cfg: EpisodeConfig, scene: object) -> list[str]:
-    friction = drive_friction(cfg, scene)  # type: ignore[arg-type]
+def _drive_lines(cfg: EpisodeConfig, scene: Scene) -> list[str]:
+    friction = drive_friction(cfg, scene)
     if friction is None:
         return []
     law, out = friction.law, []
@@ -79,4 +78,4 @@ def export_scene(cfg: EpisodeConfig, out: str | Path) -> SceneExport:
     read = mujoco.MjModel.from_xml_path(str(result.path))
     # the keyframe adds its fields, its name (names_map) and its count (_sizes), nothing else
     beyond = tuple(sorted(differences(model, read, ignore=("key_", "nkey", "names_map", "_sizes"))))
-    return SceneExport(dataclasses.replace(result), cfg.seed, not_in_model, beyond)
+    return SceneExport(result, cfg.seed, not_in_model, beyond)
