@@ -136,8 +136,8 @@ def _before_after(out: dict) -> tuple[dict[str, float], dict[str, float]]:
 @pytest.mark.slow
 def test_sim2real_on_a_concealed_cell_moves_the_outcomes_toward_it(latency_cell) -> None:
     """The diagnosis finds the latency and only it; the updated simulator's outcomes are nearer
-    the cell's than the nominal's: the insert travel a late drive changes (15.8 um off with the
-    nominal simulator, 1.3 um with the updated one), the rest (one hole: within their noise)
+    the cell's than the nominal's: the insert travel a late drive changes (13.9 um off with the
+    nominal simulator, 2.0 um with the updated one), the rest (one hole: within their noise)
     together."""
     cell, s2r, _, out = latency_cell
     (found,) = out["established"]
@@ -151,9 +151,12 @@ def test_sim2real_on_a_concealed_cell_moves_the_outcomes_toward_it(latency_cell)
 
 
 @pytest.mark.slow
-def test_the_updated_simulator_comes_five_times_closer_in_insert_travel(latency_cell) -> None:
+def test_the_updated_simulator_comes_twice_as_close_in_insert_travel(latency_cell) -> None:
+    """On one hole the insert travel is set by the contact as much as by the fit: the hole
+    rerun with the truth's delay moved within its fitted 2 sigma spans -5.0...+0.3 um against
+    the nominal's 13.9 um (docs/sim2real.md), so the update is 2.8x closer at worst."""
     before, after = _before_after(latency_cell[3])
-    assert after["seated_depth"] < before["seated_depth"] / 5
+    assert after["seated_depth"] < before["seated_depth"] / 2
 
 
 @pytest.mark.slow
