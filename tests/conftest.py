@@ -31,3 +31,21 @@ def calibrated_inspect():
     from serpar.vision.imaging import ImagingConfig
 
     return calibrate("inspect", ImagingConfig(), seed=0)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """Under ``--dist loadgroup`` a module's tests that share a module-scoped fixture of their
+    own module (a recorded twin, a sim2real run) go to one worker: split over two, each worker
+    would build the fixture again (minutes for the episode fixtures). A test already in a
+    group keeps it; before xdist's own hook, which reads the marker."""
+    for item in items:
+        if item.get_closest_marker("xdist_group") is not None:
+            continue
+        module = item.nodeid.split("::", 1)[0]
+        defs = getattr(item, "_fixtureinfo", None)
+        if defs is None:
+            continue
+        if any(fd[-1].scope in ("module", "package") and fd[-1].baseid == module
+               for fd in defs.name2fixturedefs.values()):
+            item.add_marker(pytest.mark.xdist_group(module.rsplit("/", 1)[-1]))
