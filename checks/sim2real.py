@@ -192,9 +192,12 @@ def bore_rerun_mu(real: list[HoleOutcome], nominal: list[HoleOutcome], mu0: floa
 
 
 def bore_stage(episodes: list[RealEpisode], real: list[HoleOutcome], nominal: list[HoleOutcome],
-               out: Path, start_model: str | None, step: Tick) -> BoreFriction:
-    """The bore's friction from the insertions: a rerun of the holes at a second mu where the
-    cell's in-bore push differs from the simulator's (diagnosis/bore_friction.py)."""
+               out: Path, arm_model: str | None, step: Tick) -> BoreFriction:
+    """The bore's friction from the insertions (diagnosis/bore_friction.py): where the cell's
+    in-bore push differs from the nominal rerun's, the first holes again at the nominal mu and
+    at a second mu, both on ``arm_model`` (the diagnosed arm): the push also carries the arm's
+    own physics (a hand's weight in the axial estimate, the drive friction the force loop
+    works against), which a line through two reruns on the nominal arm would read as mu."""
     mu1, why = bore_rerun_mu(real, nominal, NOMINAL_MU)
     if mu1 is None:
         return BoreFriction(None, None, 0, (NOMINAL_MU, NOMINAL_MU), why,
@@ -202,10 +205,11 @@ def bore_stage(episodes: list[RealEpisode], real: list[HoleOutcome], nominal: li
     # each recording's first holes: a rerun's prefix is those holes of the whole rerun
     prefixes = [dataclasses.replace(e, config=dataclasses.replace(
         e.config, holes=tuple(e.config.holes)[:BORE_HOLES])) for e in episodes]  # type: ignore[arg-type]
-    step(f"the in-bore push differs from the simulator's: the first {BORE_HOLES} holes again "
-         f"at mu {mu1:.3g}")
-    other = outcomes_of(rerun(prefixes, out / "bore_mu", start_model, mu1, step))
-    return bore_friction(real, nominal, other, NOMINAL_MU, mu1)
+    step(f"the in-bore push differs from the nominal simulator's: the first {BORE_HOLES} holes "
+         f"again on the diagnosed arm at mu {NOMINAL_MU:.3g} and {mu1:.3g}")
+    at_mu0 = outcomes_of(rerun(prefixes, out / "bore_mu0", arm_model, None, step))
+    at_mu1 = outcomes_of(rerun(prefixes, out / "bore_mu", arm_model, mu1, step))
+    return bore_friction(real, at_mu0, at_mu1, NOMINAL_MU, mu1)
 
 
 def with_bore_friction(model: dict[str, object], found: BoreFriction) -> tuple[dict[str, object], str]:

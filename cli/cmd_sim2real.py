@@ -116,12 +116,13 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                  "simulator on the same holes")
             nominal_outcomes = outcomes_of(rerun(episodes, out / "nominal", start_model, None, step))
             before = compare(real_outcomes, nominal_outcomes)
-            bore = bore_stage(episodes, real_outcomes, nominal_outcomes, out, start_model, step)
             step("diagnosing the real recordings against it")
             nominal = dataclasses.replace(episodes[0].config, plant_model=start_model)
             diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell",
                                               args.seed, step)
             notes += more
+            arm_path, _ = write_updated(model, out)  # the bore's reruns run on the diagnosed arm
+            bore = bore_stage(episodes, real_outcomes, nominal_outcomes, out, str(arm_path), step)
             model, bore_note = with_bore_friction(model, bore)
             notes += [bore_note] if bore_note else []
             model_path, exported = write_updated(model, out)

@@ -4,8 +4,9 @@ gains) over a leading batch axis N; one arm is a batch of one.
 Every law returns joint torques including the model's gravity and Coriolis terms; the caller
 saturates them. Matrix products run per trial through np.matmul, which takes the BLAS kernels a
 single ``@`` takes, and the quaternion helpers spell out MuJoCo's mju_ functions, so a trial's
-torque does not depend on the batch it runs in and is what the single-arm laws gave, bit for bit
-(tests/test_arm_controller_reference.py, tests/test_batch_controller.py). Trials may run
+torque does not depend on the batch it runs in (bit for bit: tests/test_batch_controller.py) and
+is what the single-arm laws gave, to the last bits a CPU's vector paths change
+(tests/test_arm_controller_reference.py). Trials may run
 different laws: ``law_torque`` evaluates each law on the trials that are in it. The gains and
 target types are :mod:`serpar.controllers.arm_laws`'.
 """

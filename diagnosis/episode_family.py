@@ -118,6 +118,11 @@ class EpisodeFamily:
         rows = np.asarray(rows, np.int64)
         return rows[rows < self.n_arm], rows[rows >= self.n_arm] - self.n_arm
 
+    def entries_of(self, effect: str, rows: NDArray[np.int64]) -> int | None:
+        """The residual entries of ``rows`` the contact friction moves: the chamfer slides' (the
+        price of its parameter, diagnosis/fit.py); every other effect: all (None)."""
+        return self._parts(rows)[1].size if effect == FRICTION.name else None
+
     def residual(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
         """The arm rows' residuals (one per arm channel each) first, then one per chamfer slide."""
         arm, slide = self._parts(rows)

@@ -1,6 +1,14 @@
 """Stage "fit": one model (the baseline plus a set of active effects) by bounded least
 squares on the training rows, scored on the held-out rows.
 
+Price of a parameter (BIC's k ln n): n is the number of residual entries the parameter's block
+moves. A family whose effects touch different parts of the data says so with the optional hook
+``entries_of(effect, rows) -> int | None`` (None: every entry). An episode's journal/bore
+friction moves its few chamfer-slide entries only, and its evidence grows with their number,
+not with the arm's 10^5 entries beside them: priced at ln(10^5) it could never be earned by two
+slides, whatever the friction (the effective sample size of a parameter, as for a group-level
+parameter of a hierarchical model).
+
 Uncertainty: the covariance of the whitened problem, (J^T J)^-1 at the optimum, scaled by the
 reduced chi-square when that exceeds one (Birge ratio): a model that does not reach the
 noise floor must not claim the noise-limited precision.
@@ -39,11 +47,15 @@ class Fit:
     n_heldout: int
     n_params: int
     nfev: int
+    price_train: float
+    """Sum over the free parameters of ln(entries its block moves) on the training rows."""
+    price_heldout: float
+    """The same on the held-out rows."""
 
     @property
     def bic(self) -> float:
-        """Known-noise BIC on the training residuals: chi^2 + k ln n."""
-        return self.train_chi2 + self.n_params * float(np.log(max(self.n_train, 2)))
+        """Known-noise BIC on the training residuals: chi^2 + sum of k ln n over the blocks."""
+        return self.train_chi2 + self.price_train
 
     @property
     def train_rms(self) -> float:
@@ -59,8 +71,19 @@ def earns(current: Fit, new: Fit) -> tuple[float, float, bool]:
     k = new.n_params - current.n_params
     d_bic = new.bic - current.bic
     d_held = current.heldout_chi2 - new.heldout_chi2
-    ok = k > 0 and d_bic < 0 and d_held > k * float(np.log(max(new.n_heldout, 2)))
+    ok = k > 0 and d_bic < 0 and d_held > new.price_heldout - current.price_heldout
     return d_bic, d_held, ok
+
+
+def price(family: Family, blocks: tuple[Effect, ...], rows: NDArray[np.int64],
+          n_entries: int) -> float:
+    """Sum over the blocks' free parameters of ln(the residual entries the block moves)."""
+    hook = getattr(family, "entries_of", None)
+    total = 0.0
+    for b in blocks:
+        n = hook(b.name, rows) if callable(hook) else None
+        total += (b.n_params - len(b.fixed)) * float(np.log(max(n_entries if n is None else n, 2)))
+    return total
 
 
 def blocks_of(family: Family, active: tuple[str, ...],
@@ -159,7 +182,8 @@ def fit_model(family: Family, active: tuple[str, ...], train: NDArray[np.int64],
         return _fit_separable(family, active, blocks, x0, free, lo, hi, train, heldout)
     if not free.any():
         r = fun(x0[free])
-        return _score(family, active, blocks, x0, r, np.zeros((r.size, x0.size)), heldout, 1)
+        return _score(family, active, blocks, x0, r, np.zeros((r.size, x0.size)), train, heldout,
+                      1)
     # a family may offer its exact Jacobian (columns in block order); else 2-point differences
     jac = ("2-point" if not callable(exact)
            else (lambda xf: exact(unpack(blocks, full(xf)), train)[:, free]))
@@ -172,7 +196,8 @@ def fit_model(family: Family, active: tuple[str, ...], train: NDArray[np.int64],
                                   "non-finite residuals")
     jac_full = np.zeros((sol.fun.size, free.size))
     jac_full[:, free] = sol.jac
-    return _score(family, active, blocks, full(sol.x), sol.fun, jac_full, heldout, int(sol.nfev))
+    return _score(family, active, blocks, full(sol.x), sol.fun, jac_full, train, heldout,
+                  int(sol.nfev))
 
 
 def _fit_separable(family: Family, active: tuple[str, ...], blocks: tuple[Effect, ...],
@@ -223,7 +248,7 @@ def _fit_separable(family: Family, active: tuple[str, ...], blocks: tuple[Effect
     x = full(xo)
     jac_full = np.zeros((r.size, free.size))
     jac_full[:, free] = family.jacobian(unpack(blocks, x), train)[:, free]  # type: ignore[attr-defined]
-    return _score(family, active, blocks, x, r, jac_full, heldout, nfev)
+    return _score(family, active, blocks, x, r, jac_full, train, heldout, nfev)
 
 
 def _free_mask(blocks: tuple[Effect, ...]) -> NDArray[np.bool_]:
@@ -233,7 +258,7 @@ def _free_mask(blocks: tuple[Effect, ...]) -> NDArray[np.bool_]:
 
 def _score(family: Family, active: tuple[str, ...], blocks: tuple[Effect, ...],
            x: NDArray[np.float64], r: NDArray[np.float64], jac: NDArray[np.float64],
-           heldout: NDArray[np.int64], nfev: int) -> Fit:
+           train_rows: NDArray[np.int64], heldout: NDArray[np.int64], nfev: int) -> Fit:
     params = unpack(blocks, x)
     chi2 = float(r @ r)
     k = x.size - sum(len(b.fixed) for b in blocks)
@@ -247,4 +272,5 @@ def _score(family: Family, active: tuple[str, ...], blocks: tuple[Effect, ...],
     std = unpack(blocks, np.sqrt(np.clip(np.diag(cov), 0.0, None)))
     held = family.residual(params, heldout) if heldout.size else np.zeros(0)
     return Fit(active, params, std, chi2, int(r.size), float(held @ held), int(held.size), k,
-               nfev)
+               nfev, price(family, blocks, train_rows, int(r.size)),
+               price(family, blocks, heldout, int(held.size)))

@@ -9,8 +9,10 @@ parameters* when it lowers the information criterion on both splits:
     training:  chi^2 drop > k ln(n_train)     (BIC with the recording's noise model)
     held-out:  chi^2 drop > k ln(n_heldout)   (the same price, paid on data the fit never saw)
 
+with n the residual entries the candidate's parameters move (diagnosis/fit.py ``price``).
+
 Of the candidates that earn, the one with the lowest held-out chi-square plus its price
-(k ln n_heldout) is added: of two that fit alike, the one with fewer parameters. Selection
+(its held-out price) is added: of two that fit alike, the one with fewer parameters. Selection
 stops when none earns, or when the held-out residual has reached the noise floor (its
 chi-square test against unit-variance noise gives p >= ``alpha``) in every independent part
 of the data the family names (``residual_parts``: an episode's chamfer slides are tested on
@@ -134,7 +136,7 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
             # the held-out chi-square with the price of the parameters: where two candidates
             # fit alike, the one with fewer parameters (a relative change of the links' inertia
             # beside their full inertial parameters)
-            net = new.heldout_chi2 + new.n_params * float(np.log(max(new.n_heldout, 2)))
+            net = new.heldout_chi2 + new.price_heldout
             if ok and (best is None or net < best[2]):
                 best = new, new_fixed, net
         if best is None:

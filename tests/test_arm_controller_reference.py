@@ -4,8 +4,13 @@ tests/data/arm_controller_reference.npz was written by :func:`record` at commit 
 ArmController still ran its own copy of the laws, model terms, observer and sensor model
 (arm_laws.py, arm_model.NominalArm, momentum.MomentumTerms, wrench.WrenchEstimator,
 arm_sensors.ArmSensors). Since then ArmController is a view of BatchArmController at N=1; the
-episode's figures were measured with the old stack, so every recorded number must come back bit
-for bit. The loop uses only ArmController's public interface, as the cell runtime drives it
+episode's figures were measured with the old stack, so every recorded number must come back to
+within floating-point reassociation. Bit for bit holds on the CPU that wrote the fixture only:
+MuJoCo's and BLAS's vector paths differ between CPUs at the last bit (an AMD EPYC without
+AVX-512 gives 2.7e-12 N m in tau and 3.3e-12 N in F_s after 360 closed-loop periods, the
+ulp-level difference growing through the loop), so the bound is ``ULP_BOUND`` (1e-9), five
+orders of magnitude under any change of the laws (a dropped term or gain moves tau by > 1e-4).
+The loop uses only ArmController's public interface, as the cell runtime drives it
 (torque sensors latched from the period mean of :class:`TorqueADC`), and visits every law,
 the unset JOINT_PD target, a feed-forward force under IMPEDANCE, a posture target and a tare.
 """
@@ -29,6 +34,8 @@ PERIODS = 360
 SIGNALS = ("tau", "wrench", "push", "offset", "q", "dq", "tau_J")
 CASES = {"ideal": (False, 0), "noise_seed3": (True, 3)}
 MEASURED = ("q", "dq", "tau_J")
+ULP_BOUND = 1e-9
+"""Largest |difference| from the fixture (N m, N, rad, rad/s): reassociation across CPUs."""
 """Kept for the noisy case only (the ideal case's measurement is the plant's, and feeds tau)."""
 
 
@@ -87,7 +94,7 @@ def record(path: Path = FIXTURE) -> None:
     np.savez_compressed(path, **arrays)
 
 
-def test_arm_controller_reproduces_the_pre_rewire_stack_bit_for_bit() -> None:
+def test_arm_controller_reproduces_the_pre_rewire_stack_to_the_last_bits() -> None:
     reference = np.load(FIXTURE)
     for case, (noise, seed) in CASES.items():
         got = closed_loop(noise, seed)
@@ -95,7 +102,7 @@ def test_arm_controller_reproduces_the_pre_rewire_stack_bit_for_bit() -> None:
             expected = reference[f"{case}/{name}"]
             assert got[name].shape == expected.shape, (case, name)
             worst = float(np.max(np.abs(got[name] - expected)))
-            assert np.array_equal(got[name], expected), (case, name, worst)
+            assert worst <= ULP_BOUND, (case, name, worst)
         # the loop really exercises the laws: torque against gravity, a moving force reference
         assert np.abs(got["tau"]).max() > 10.0 and np.abs(got["offset"]).max() > 1e-4
     assert np.abs(reference["noise_seed3/wrench"] - reference["ideal/wrench"]).max() > 1e-3

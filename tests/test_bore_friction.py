@@ -74,3 +74,23 @@ def test_the_chamfer_slides_estimate_and_the_bores_are_combined_or_kept_apart() 
         "values": [found.mu - NOMINAL_MU + 10 * found.std], "std": [found.std], "names": ["d_mu"]}}}
     model, note = with_bore_friction(far, found)
     assert model is far and "keeps the slides'" in note
+
+
+def test_a_push_the_arm_explains_is_not_read_as_the_bores_friction() -> None:
+    """A hand's weight in the axial estimate (+0.08 N, 8 g) on a cell with the nominal mu: the
+    push differs from the nominal arm's, and a line through reruns on the nominal arm reads it
+    as a mu far above the cell's; on the diagnosed arm (which carries the hand) the line reads
+    the nominal mu and nothing is named."""
+    hand = 0.08
+    real = _cell(NOMINAL_MU, seed=1, noise=0.02) + hand
+    nominal_arm = _cell(NOMINAL_MU, seed=2, noise=0.02)
+    mu1, why = bore_rerun_mu(_holes(real), _holes(nominal_arm), NOMINAL_MU)
+    assert mu1 is not None and why == ""  # the gate sees the difference: a rerun is spent
+    wrong = bore_friction(_holes(real), _holes(nominal_arm),
+                          _holes(_cell(mu1, seed=3, noise=0.02)), NOMINAL_MU, mu1)
+    assert wrong.mu is not None and wrong.mu > NOMINAL_MU + 5 * wrong.std  # what it would name
+    found = bore_friction(_holes(real), _holes(_cell(NOMINAL_MU, seed=2, noise=0.02) + hand),
+                          _holes(_cell(mu1, seed=3, noise=0.02) + hand), NOMINAL_MU, mu1)
+    assert found.mu is None and found.agrees and "within 2 sigma" in found.reason
+    model, note = with_bore_friction({"effects": ["payload"], "params": {"payload": {}}}, found)
+    assert model["effects"] == ["payload"] and note == ""
