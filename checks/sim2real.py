@@ -249,10 +249,16 @@ def updated_contact_friction(model: dict[str, object]) -> float | None:
     return float(np.clip(NOMINAL_MU + d_mu, *MU_RANGE))
 
 
-def write_updated(model: dict[str, object], out: Path) -> tuple[Path, MjcfExport]:
-    """``updated.model.json`` and ``updated.xml`` of the updated model."""
+def write_model_file(model: dict[str, object], out: Path) -> Path:
+    """``updated.model.json`` of the updated model (what a rerun's plant reads)."""
     path = out / "updated.model.json"
     path.write_text(json.dumps(model, indent=2))
+    return path
+
+
+def write_updated(model: dict[str, object], out: Path) -> tuple[Path, MjcfExport]:
+    """``updated.model.json`` and ``updated.xml`` of the updated model."""
+    path = write_model_file(model, out)
     return path, export_arm_mjcf(parse_model(model, str(path)), out / "updated.xml")
 
 

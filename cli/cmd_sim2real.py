@@ -20,6 +20,7 @@ from serpar.checks.sim2real import (
     rerun,
     updated_contact_friction,
     with_bore_friction,
+    write_model_file,
     write_updated,
 )
 from serpar.checks.sim2real_confirm import confirmed_update, to_confirm
@@ -121,7 +122,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
             diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell",
                                               args.seed, step)
             notes += more
-            arm_path, _ = write_updated(model, out)  # the bore's reruns run on the diagnosed arm
+            arm_path = write_model_file(model, out)  # the bore's reruns run on the diagnosed arm
             bore = bore_stage(episodes, real_outcomes, nominal_outcomes, out, str(arm_path), step)
             model, bore_note = with_bore_friction(model, bore)
             notes += [bore_note] if bore_note else []

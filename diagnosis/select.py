@@ -8,8 +8,7 @@ parameters* when it lowers the information criterion on both splits:
 
     training:  chi^2 drop > k ln(n_train)     (BIC with the recording's noise model)
     held-out:  chi^2 drop > k ln(n_heldout)   (the same price, paid on data the fit never saw)
-
-with n the residual entries the candidate's parameters move (diagnosis/fit.py ``price``).
+    (n: the residual entries the candidate's parameters move, diagnosis/fit.py ``price``)
 
 Of the candidates that earn, the one with the lowest held-out chi-square plus its price
 (its held-out price) is added: of two that fit alike, the one with fewer parameters. Selection

@@ -34,9 +34,9 @@ PERIODS = 360
 SIGNALS = ("tau", "wrench", "push", "offset", "q", "dq", "tau_J")
 CASES = {"ideal": (False, 0), "noise_seed3": (True, 3)}
 MEASURED = ("q", "dq", "tau_J")
+"""Kept for the noisy case only (the ideal case's measurement is the plant's, and feeds tau)."""
 ULP_BOUND = 1e-9
 """Largest |difference| from the fixture (N m, N, rad, rad/s): reassociation across CPUs."""
-"""Kept for the noisy case only (the ideal case's measurement is the plant's, and feeds tau)."""
 
 
 def closed_loop(noise: bool, seed: int) -> dict[str, np.ndarray]:
