@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,8 +43,6 @@ from serpar.tasks.run_episodes import recording_folder
 Tick = Callable[[str], None]
 NOMINAL_MU = PhysicsConfig().precision_friction
 MU_RANGE = BORE_MU_RANGE
-BORE_HOLES = 6
-"""Holes of each recording the bore-friction rerun takes (its first): half a 12-hole cell's."""
 MU_STEP_UP, MU_STEP_DOWN = 0.25, 0.1
 """The second mu a bore-friction rerun takes, above or below the nominal's (the concealed
 cells' range: 0.1-0.5)."""
@@ -191,25 +190,40 @@ def bore_rerun_mu(real: list[HoleOutcome], nominal: list[HoleOutcome], mu0: floa
     return mu0 + step, ""
 
 
-def bore_stage(episodes: list[RealEpisode], real: list[HoleOutcome], nominal: list[HoleOutcome],
-               out: Path, arm_model: str | None, step: Tick) -> BoreFriction:
-    """The bore's friction from the insertions (diagnosis/bore_friction.py): where the cell's
-    in-bore push differs from the nominal rerun's, the first holes again at the nominal mu and
-    at a second mu, both on ``arm_model`` (the diagnosed arm): the push also carries the arm's
-    own physics (a hand's weight in the axial estimate, the drive friction the force loop
-    works against), which a line through two reruns on the nominal arm would read as mu."""
-    mu1, why = bore_rerun_mu(real, nominal, NOMINAL_MU)
+def updated_rerun(episodes: list[RealEpisode], real: list[HoleOutcome], model: dict[str, object],
+                  out: Path, step: Tick) -> tuple[dict[str, object], BoreFriction, list[Path], str]:
+    """The diagnosed simulator on the same holes (``OUT/updated``), and the bore's friction read
+    against it (diagnosis/bore_friction.py): the updated model (with the bore's mu where the
+    insertions give one), the bore's finding, the updated rerun's folders and a note.
+
+    The in-bore push also carries the arm's own physics (a hand's weight in the axial estimate,
+    the drive friction the force loop works against), which a line through reruns on the
+    nominal arm would read as mu: the push is read against the diagnosed arm, whose rerun at
+    the model's mu is the line's first point. Where the cell's push differs from it, every hole
+    again at a second mu (``OUT/bore_mu``); where that gives a mu, the first rerun becomes
+    ``OUT/bore_mu0`` and the holes run once more with it."""
+    arm_path = write_model_file(model, out)
+    mu0 = updated_contact_friction(model)
+    updated = rerun(episodes, out / "updated", str(arm_path), mu0, step)
+    at_mu0 = outcomes_of(updated)
+    mu = NOMINAL_MU if mu0 is None else mu0
+    mu1, why = bore_rerun_mu(real, at_mu0, mu)
     if mu1 is None:
-        return BoreFriction(None, None, 0, (NOMINAL_MU, NOMINAL_MU), why,
-                            agrees=why.startswith("the in-bore push agrees"))
-    # each recording's first holes: a rerun's prefix is those holes of the whole rerun
-    prefixes = [dataclasses.replace(e, config=dataclasses.replace(
-        e.config, holes=tuple(e.config.holes)[:BORE_HOLES])) for e in episodes]  # type: ignore[arg-type]
-    step(f"the in-bore push differs from the nominal simulator's: the first {BORE_HOLES} holes "
-         f"again on the diagnosed arm at mu {NOMINAL_MU:.3g} and {mu1:.3g}")
-    at_mu0 = outcomes_of(rerun(prefixes, out / "bore_mu0", arm_model, None, step))
-    at_mu1 = outcomes_of(rerun(prefixes, out / "bore_mu", arm_model, mu1, step))
-    return bore_friction(real, at_mu0, at_mu1, NOMINAL_MU, mu1)
+        return model, BoreFriction(None, None, 0, (mu, mu), why,
+                                   agrees=why.startswith("the in-bore push agrees")), updated, ""
+    step(f"the in-bore push differs from the diagnosed simulator's: the holes again at mu "
+         f"{mu1:.3g} (the bore's friction)")
+    at_mu1 = outcomes_of(rerun(episodes, out / "bore_mu", str(arm_path), mu1, step))
+    bore = bore_friction(real, at_mu0, at_mu1, mu, mu1)
+    model, note = with_bore_friction(model, bore)
+    contact = updated_contact_friction(model)
+    if contact == mu0:
+        return model, bore, updated, note
+    shutil.rmtree(out / "bore_mu0", ignore_errors=True)  # a replaced output's (--force)
+    (out / "updated").rename(out / "bore_mu0")
+    path = write_model_file(model, out)
+    step(f"the bore's mu {contact:.3g} in the update: the holes once more")
+    return model, bore, rerun(episodes, out / "updated", str(path), contact, step), note
 
 
 def with_bore_friction(model: dict[str, object], found: BoreFriction) -> tuple[dict[str, object], str]:

@@ -10,7 +10,6 @@ from pathlib import Path
 from serpar.checks.sim2real import (
     OutcomeDiff,
     beyond_ci,
-    bore_stage,
     carried_words,
     compare,
     diagnose_cell,
@@ -19,8 +18,7 @@ from serpar.checks.sim2real import (
     real_episodes,
     rerun,
     updated_contact_friction,
-    with_bore_friction,
-    write_model_file,
+    updated_rerun,
     write_updated,
 )
 from serpar.checks.sim2real_confirm import confirmed_update, to_confirm
@@ -122,16 +120,13 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
             diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell",
                                               args.seed, step)
             notes += more
-            arm_path = write_model_file(model, out)  # the bore's reruns run on the diagnosed arm
-            bore = bore_stage(episodes, real_outcomes, nominal_outcomes, out, str(arm_path), step)
-            model, bore_note = with_bore_friction(model, bore)
+            step(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
+                 "updated simulator on the same holes")
+            model, bore, updated, bore_note = updated_rerun(episodes, real_outcomes, model, out, step)
             notes += [bore_note] if bore_note else []
             model_path, exported = write_updated(model, out)
             contact = updated_contact_friction(model)
             found = established(diag, model)
-            step(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
-                 "updated simulator on the same holes")
-            updated = rerun(episodes, out / "updated", str(model_path), contact, step)
             after = compare(real_outcomes, outcomes_of(updated))
             carried = to_confirm([str(f["effect"]) for f in found], bore.mu, diag.findings,
                                  model["effects"])  # type: ignore[arg-type]

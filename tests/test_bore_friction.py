@@ -94,3 +94,47 @@ def test_a_push_the_arm_explains_is_not_read_as_the_bores_friction() -> None:
     assert found.mu is None and found.agrees and "within 2 sigma" in found.reason
     model, note = with_bore_friction({"effects": ["payload"], "params": {"payload": {}}}, found)
     assert model["effects"] == ["payload"] and note == ""
+
+
+def _fake_simulator(monkeypatch: pytest.MonkeyPatch, real_mu: float, hand: float = 0.0) -> list:
+    """checks/sim2real.py's reruns replaced by synthetic holes: a rerun on the diagnosed arm
+    (a model file) carries the hand's push, a rerun's mu is its contact friction."""
+    from serpar.checks import sim2real
+
+    calls: list[tuple[str, float | None]] = []
+
+    def rerun(episodes, out, plant_model, contact_friction, tick):
+        out.mkdir(parents=True)
+        calls.append((out.name, contact_friction))
+        mu = NOMINAL_MU if contact_friction is None else contact_friction
+        push = _cell(mu, seed=2 + len(calls), noise=0.02) + (hand if plant_model else 0.0)
+        (out / "push.npy").write_bytes(push.tobytes())
+        return [out]
+
+    monkeypatch.setattr(sim2real, "rerun", rerun)
+    monkeypatch.setattr(sim2real, "outcomes_of", lambda folders: _holes(
+        np.frombuffer((folders[0] / "push.npy").read_bytes())))
+    return calls
+
+
+@pytest.mark.parametrize(("real_mu", "hand"), [(NOMINAL_MU, 0.08), (0.445, 0.08)])
+def test_the_bores_friction_is_read_against_the_updated_rerun(real_mu, hand, monkeypatch,
+                                                              tmp_path) -> None:
+    """The diagnosed simulator's rerun (OUT/updated) is the line's first point: a push the
+    diagnosed arm explains (a hand's weight) spends no second rerun and names no mu; a cell
+    whose bore is rougher gets its mu from one more rerun at a second mu (OUT/bore_mu), and the
+    holes run once more with it (the first rerun kept as OUT/bore_mu0)."""
+    from serpar.checks.sim2real import updated_rerun
+
+    calls = _fake_simulator(monkeypatch, real_mu, hand)
+    real = _holes(_cell(real_mu, seed=1, noise=0.02) + hand)
+    model, bore, folders, note = updated_rerun([], real, {"effects": ["payload"], "params": {
+        "payload": {}}}, tmp_path, lambda line: None)
+    if real_mu == NOMINAL_MU:
+        assert calls == [("updated", None)] and bore.mu is None and bore.agrees
+        assert model["effects"] == ["payload"] and note == "" and folders == [tmp_path / "updated"]
+        return
+    assert [c[0] for c in calls] == ["updated", "bore_mu", "updated"]
+    assert bore.mu is not None and abs(bore.mu - real_mu) < 2 * bore.std
+    assert calls[2][1] == pytest.approx(bore.mu) and "contact_friction" in model["effects"]
+    assert (tmp_path / "bore_mu0" / "push.npy").is_file() and folders == [tmp_path / "updated"]
