@@ -86,11 +86,14 @@ def bore_friction(real: list[HoleOutcome], at_mu0: list[HoleOutcome], at_mu1: li
     d = np.array([b[k] - a[k] for k in keys])
     n = len(keys)
     d_sigma = float(d.std(ddof=1) / math.sqrt(n))
-    if not abs(d.mean()) > stats.t.ppf(1.0 - SENSITIVITY_P / 2, n - 1) * d_sigma:
+    t_needed = float(stats.t.ppf(1.0 - SENSITIVITY_P / 2, n - 1))
+    if not abs(d.mean()) > t_needed * d_sigma:
+        t = abs(d.mean()) / d_sigma if d_sigma > 0 else 0.0
         return BoreFriction(None, None, n, reruns,
                             f"mu {mu0:.3g} -> {mu1:.3g} moves the simulator's in-bore push by "
-                            f"{d.mean():+.3g} ± {d_sigma:.2g} N over {n} holes: these holes' "
-                            "travel does not load the bore's wall enough to read its friction")
+                            f"{d.mean():+.3g} ± {d_sigma:.2g} N over {n} holes (t {t:.2g}, where "
+                            f"3 sigma asks {t_needed:.2g}): these holes' travel does not load "
+                            "the bore's wall enough to read its friction")
     x = float(d @ y / (d @ d))
     scatter = float(np.sqrt(np.sum((y - x * d) ** 2) / (n - 1)))
     mu = mu0 + x * (mu1 - mu0)
