@@ -44,7 +44,7 @@ Tick = Callable[[str], None]
 NOMINAL_MU = PhysicsConfig().precision_friction
 MU_RANGE = BORE_MU_RANGE
 MU_STEP_UP, MU_STEP_DOWN = 0.25, 0.1
-"""The second mu a bore-friction rerun takes, above or below the nominal's (the concealed
+"""The second mu a bore-friction rerun takes, above or below the updated rerun's (the concealed
 cells' range: 0.1-0.5)."""
 
 
@@ -172,12 +172,12 @@ def diagnose_cell(episodes: list[RealEpisode], nominal: EpisodeConfig, source: s
     return diag, diag.model_file(str(longest.folder)), notes
 
 
-def bore_rerun_mu(real: list[HoleOutcome], nominal: list[HoleOutcome], mu0: float
+def bore_rerun_mu(real: list[HoleOutcome], sim: list[HoleOutcome], mu0: float
                   ) -> tuple[float | None, str]:
     """The second mu to rerun the holes at for the bore's friction, or None with why not: the
     real in-bore push against the simulator's at ``mu0``, paired per hole; where it agrees
     within its 95 % CI there is nothing to fit and no rerun is spent."""
-    by_hole = {(h.cycle, h.hole): h.bore_axial for h in nominal if h.bore_axial is not None}
+    by_hole = {(h.cycle, h.hole): h.bore_axial for h in sim if h.bore_axial is not None}
     d = paired([h.bore_axial[0] - by_hole[(h.cycle, h.hole)][0] for h in real
                 if h.bore_axial is not None and (h.cycle, h.hole) in by_hole])
     if d.diff is None or d.ci is None:

@@ -96,9 +96,10 @@ def test_a_push_the_arm_explains_is_not_read_as_the_bores_friction() -> None:
     assert model["effects"] == ["payload"] and note == ""
 
 
-def _fake_simulator(monkeypatch: pytest.MonkeyPatch, real_mu: float, hand: float = 0.0) -> list:
+def _fake_simulator(monkeypatch: pytest.MonkeyPatch, hand: float) -> list:
     """checks/sim2real.py's reruns replaced by synthetic holes: a rerun on the diagnosed arm
-    (a model file) carries the hand's push, a rerun's mu is its contact friction."""
+    (a model file) carries the hand's push, a rerun's mu is its contact friction; returns the
+    (folder, mu) of every rerun asked for."""
     from serpar.checks import sim2real
 
     calls: list[tuple[str, float | None]] = []
@@ -117,24 +118,29 @@ def _fake_simulator(monkeypatch: pytest.MonkeyPatch, real_mu: float, hand: float
     return calls
 
 
-@pytest.mark.parametrize(("real_mu", "hand"), [(NOMINAL_MU, 0.08), (0.445, 0.08)])
-def test_the_bores_friction_is_read_against_the_updated_rerun(real_mu, hand, monkeypatch,
-                                                              tmp_path) -> None:
-    """The diagnosed simulator's rerun (OUT/updated) is the line's first point: a push the
-    diagnosed arm explains (a hand's weight) spends no second rerun and names no mu; a cell
-    whose bore is rougher gets its mu from one more rerun at a second mu (OUT/bore_mu), and the
-    holes run once more with it (the first rerun kept as OUT/bore_mu0)."""
+def _updated_rerun(real_mu: float, hand: float, monkeypatch, out):
     from serpar.checks.sim2real import updated_rerun
 
-    calls = _fake_simulator(monkeypatch, real_mu, hand)
+    calls = _fake_simulator(monkeypatch, hand)
     real = _holes(_cell(real_mu, seed=1, noise=0.02) + hand)
-    model, bore, folders, note = updated_rerun([], real, {"effects": ["payload"], "params": {
-        "payload": {}}}, tmp_path, lambda line: None)
-    if real_mu == NOMINAL_MU:
-        assert calls == [("updated", None)] and bore.mu is None and bore.agrees
-        assert model["effects"] == ["payload"] and note == "" and folders == [tmp_path / "updated"]
-        return
+    model = {"effects": ["payload"], "params": {"payload": {}}}
+    return calls, *updated_rerun([], real, model, out, lambda line: None)
+
+
+def test_a_push_the_updated_rerun_explains_spends_no_second_rerun(monkeypatch, tmp_path) -> None:
+    """The diagnosed simulator's rerun (OUT/updated) is the line's first point: a hand's weight
+    it carries leaves the push agreeing with the cell's, no rerun at a second mu, no mu named."""
+    calls, model, bore, folders, note = _updated_rerun(NOMINAL_MU, 0.08, monkeypatch, tmp_path)
+    assert calls == [("updated", None)] and bore.mu is None and bore.agrees
+    assert model["effects"] == ["payload"] and note == "" and folders == [tmp_path / "updated"]
+
+
+def test_a_rougher_bore_gets_its_mu_and_the_holes_once_more(monkeypatch, tmp_path) -> None:
+    """A cell at mu 0.445 (and a hand): one rerun at a second mu (OUT/bore_mu) gives mu within
+    2 sigma, and the holes run once more with it, the first rerun kept as OUT/bore_mu0."""
+    calls, model, bore, folders, note = _updated_rerun(0.445, 0.08, monkeypatch, tmp_path)
     assert [c[0] for c in calls] == ["updated", "bore_mu", "updated"]
-    assert bore.mu is not None and abs(bore.mu - real_mu) < 2 * bore.std
+    assert bore.mu is not None and abs(bore.mu - 0.445) < 2 * bore.std
     assert calls[2][1] == pytest.approx(bore.mu) and "contact_friction" in model["effects"]
     assert (tmp_path / "bore_mu0" / "push.npy").is_file() and folders == [tmp_path / "updated"]
+    assert "in the updated model" in note
