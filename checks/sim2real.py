@@ -30,7 +30,7 @@ from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis
 from serpar.diagnosis.config_model import model_from_config
 from serpar.diagnosis.prior import PriorFamily
 from serpar.diagnosis.result import Diagnosis
-from serpar.diagnosis.select import diagnose
+from serpar.diagnosis.select import default_config, diagnose
 from serpar.diagnosis.task_outcomes import OUTCOMES, RESOLUTION, HoleOutcome, hole_outcomes
 from serpar.errors import ConfigError
 from serpar.sim.mjcf_export import MjcfExport, export_arm_mjcf
@@ -159,15 +159,17 @@ def outcomes_of(folders: list[Path]) -> list[HoleOutcome]:
 
 
 def diagnose_cell(episodes: list[RealEpisode], nominal: EpisodeConfig, source: str, seed: int,
-                  report: Tick | None = None) -> tuple[Diagnosis, dict[str, object], list[str]]:
-    """Diagnose the longest recording against the simulator ``nominal`` builds; the combined
-    model (the simulator's effects updated by what the recording shows) and notes."""
+                  report: Tick | None = None, workers: int = 0
+                  ) -> tuple[Diagnosis, dict[str, object], list[str]]:
+    """Diagnose the longest recording against the simulator ``nominal`` builds (its fits on
+    ``workers`` processes, 0: every core); the combined model (the simulator's effects
+    updated by what the recording shows) and notes."""
     longest = max(episodes, key=lambda e: len(e.config.holes))  # type: ignore[arg-type]
     notes = [f"{e.folder.name}: not diagnosed (the longest recording, {longest.folder.name}, is)"
              for e in episodes if e is not longest]
     family = PriorFamily(family_from_recording(load_for_diagnosis(longest.folder)),
                          model_from_config(nominal, source))
-    diag = diagnose(family, seed, report=report)
+    diag = diagnose(family, seed, default_config(family, workers), report)
     diag = dataclasses.replace(diag, model=family.combined_model(diag.model))
     return diag, diag.model_file(str(longest.folder)), notes
 

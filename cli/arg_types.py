@@ -29,3 +29,15 @@ def span(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(f"{text!r} is not START:END in seconds from the first "
                                          "sample (0 <= START < END), e.g. 0.1:6")
     return a, b
+
+
+def workers(text: str) -> int:
+    """A count of local processes: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid int value: {text!r}; workers are 1, 2, ..."
+                                         ) from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value}: workers are 1, 2, ... local processes")
+    return value

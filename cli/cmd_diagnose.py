@@ -16,7 +16,7 @@ from serpar.diagnosis.choose import family_from_recording, load_for_diagnosis, l
 from serpar.diagnosis.config_model import is_config_path, model_from_episode_config
 from serpar.diagnosis.prior import PriorFamily
 from serpar.diagnosis.report_html import write_report
-from serpar.diagnosis.select import diagnose
+from serpar.diagnosis.select import default_config, diagnose
 from serpar.errors import ConfigError
 from serpar.sim.mjcf_export import export_mjcf, read_any_model
 from serpar.sim.model_file import parse_model
@@ -61,6 +61,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--withhold", action="append", default=[], metavar="EFFECT",
                    help="diagnose without this candidate (repeatable): how the verdict reads "
                         "where the library lacks a form, as the blind bench's withheld trials")
+    p.add_argument("--workers", type=arg_types.workers, default=0,
+                   help="local processes that fit the diagnosis's candidates and resampled folds side by side (default: one per core; the findings are the same)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_diagnose)
     return p
@@ -139,7 +141,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         family = prior = PriorFamily(family, read(args.model))
     with StageLines("diagnose") as step:  # one line per stage on stderr, always
         try:
-            diag = diagnose(family, args.seed, report=step)
+            diag = diagnose(family, args.seed, default_config(family, args.workers), step)
         except KeyboardInterrupt:  # Ctrl-C: where it stopped, no verdict
             return step.interrupted(args.json, recording=str(args.recording))
     if prior is not None:  # the written model: M's effects, corrected, plus the new ones

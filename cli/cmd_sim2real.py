@@ -45,6 +45,8 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--report", metavar="OUT.html", help="write the HTML report (table, plots)")
     p.add_argument("--seed", type=arg_types.seed, default=0,
                    help="seed of the diagnosis's split, and of the parts where a log has no seed")
+    p.add_argument("--workers", type=arg_types.workers, default=0,
+                   help="local processes that fit the diagnosis's candidates and resampled folds side by side (default: one per core; the findings are the same)")
     add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_sim2real)
@@ -118,7 +120,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
             step("diagnosing the real recordings against it")
             nominal = dataclasses.replace(episodes[0].config, plant_model=start_model)
             diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell",
-                                              args.seed, step)
+                                              args.seed, step, args.workers)
             notes += more
             step(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
                  "updated simulator on the same holes")

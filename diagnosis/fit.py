@@ -117,6 +117,14 @@ share of it is done. Every decision the diagnosis takes is on chi^2 differences 
 (k ln n per parameter, held-out drops); a misspecified fit (chi^2 in the millions) crawls along
 its valley for thousands of evaluations under the tolerances above and moves its chi^2 by a
 few units (a few 1e-6 of itself) doing so, while a fit near the noise stops on them first."""
+CRAWL_EXCESS_SHARE = 1e-6
+"""A fit is also done when its last :data:`CRAWL_ITERATIONS` steps lowered chi^2 by less than
+this share of its excess over the noise (chi^2 minus its residual entries). A candidate that
+cannot be what the data show (a friction form fitted while a hand's mass is missing, chi^2 at
+400x the noise) otherwise descends by tens of units per ten steps for thousands of steps, a
+few 1e-4 of its chi^2 in all, where what decides on it (its held-out chi^2 against the other
+candidates', k ln n per parameter) is a thousand times coarser; near the noise the excess is
+small and the rule above stops first."""
 
 
 def _crawl_stop() -> Callable[[OptimizeResult], None]:
@@ -124,9 +132,11 @@ def _crawl_stop() -> Callable[[OptimizeResult], None]:
     costs: list[float] = []
 
     def callback(intermediate_result: OptimizeResult) -> None:  # scipy passes it by this name
-        costs.append(float(intermediate_result.cost))
+        costs.append(float(intermediate_result.cost))  # chi^2 / 2
+        excess = costs[-1] - 0.5 * np.size(intermediate_result.fun)
         if (len(costs) > CRAWL_ITERATIONS
-                and costs[-1 - CRAWL_ITERATIONS] - costs[-1] < CRAWL_SHARE * costs[-1]):
+                and costs[-1 - CRAWL_ITERATIONS] - costs[-1]
+                < max(CRAWL_SHARE * costs[-1], CRAWL_EXCESS_SHARE * excess)):
             raise StopIteration
 
     return callback

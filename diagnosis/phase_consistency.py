@@ -19,6 +19,7 @@ A family opts in with ``row_phases`` (each row's phase name, "" for rows of none
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from functools import partial
 from itertools import combinations
 
 import numpy as np
@@ -26,6 +27,7 @@ from numpy.typing import NDArray
 
 from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.fit import Fit, earns, fit_model
+from serpar.diagnosis.parallel import results, run_all
 
 Rows = NDArray[np.int64]
 AGREE_SIGMA = 2.0
@@ -38,8 +40,8 @@ MIN_PHASE_ROWS = 40
 
 
 def phase_reasons(family: Family, fit: Fit, name: str, train: Rows, heldout: Rows,
-                  overrides: Mapping[str, Effect], report: Callable[[str], None] | None = None
-                  ) -> list[str]:
+                  overrides: Mapping[str, Effect], report: Callable[[str], None] | None = None,
+                  workers: int = 0) -> list[str]:
     """Why ``name`` is not established by the phases (empty: it holds; a family without
     phases, or an effect it does not check, always holds)."""
     phases = getattr(family, "row_phases", None)
@@ -52,14 +54,16 @@ def phase_reasons(family: Family, fit: Fit, name: str, train: Rows, heldout: Row
     names = [p for p in dict.fromkeys(phases[train]) if p]
     per_phase: dict[str, tuple[bool, NDArray[np.float64], NDArray[np.float64]]] = {}
     without = tuple(a for a in fit.active if a != name)
-    for phase in names:
-        tr, ho = train[phases[train] == phase], heldout[phases[heldout] == phase]
-        if tr.size < MIN_PHASE_ROWS or ho.size < MIN_PHASE_ROWS:
-            continue
-        if report:
-            report(f"{name} in the {phase} phase alone ({tr.size} rows)")
-        full = fit_model(family, fit.active, tr, ho, fit.params, overrides)
-        rest = fit_model(family, without, tr, ho, fit.params, overrides)
+    rows = {phase: (train[phases[train] == phase], heldout[phases[heldout] == phase])
+            for phase in names}
+    fitted = [p for p in names if min(rows[p][0].size, rows[p][1].size) >= MIN_PHASE_ROWS]
+    if report and fitted:
+        report(f"{name} in each free-motion phase alone ({', '.join(fitted)})")
+    # each phase with and without the effect: independent fits, side by side
+    both = results(run_all([partial(fit_model, family, active, *rows[p], fit.params, overrides)
+                            for p in fitted for active in (fit.active, without)], workers))
+    for k, phase in enumerate(fitted):
+        full, rest = both[2 * k], both[2 * k + 1]
         per_phase[phase] = (earns(rest, full)[2], np.asarray(full.params[name])[claimed],
                             np.asarray(full.std[name])[claimed])
     holding = [p for p, (holds, _, _) in per_phase.items() if holds]

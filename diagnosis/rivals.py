@@ -17,12 +17,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
 
 from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.fit import Fit, fit_model
+from serpar.diagnosis.parallel import results, run_all
 from serpar.diagnosis.result import CandidateScore
 from serpar.diagnosis.stability import fit_identified
 
@@ -74,12 +76,13 @@ def _row_terms(r_a: NDArray[np.float64], r_b: NDArray[np.float64],
 
 def rivals(family: Family, kept: Fit, path: list[Fit], scores: list[CandidateScore],
            fixed: Mapping[str, Effect], train: NDArray[np.int64], heldout: NDArray[np.int64],
-           splits: list[tuple[NDArray[np.int64], NDArray[np.int64]]] | None = None
-           ) -> dict[str, Rival]:
+           splits: list[tuple[NDArray[np.int64], NDArray[np.int64]]] | None = None,
+           workers: int = 0) -> dict[str, Rival]:
     """Per established effect of ``kept``, the first rival the held-out rows cannot tell from
     it (none: absent). ``splits``: the resampling folds; each row is held out in one of them,
     so the test is cross-validated over every row (the main split's held-out rows alone made
-    the answer depend on which rows the seed held out). Without folds: the main split."""
+    the answer depend on which rows the seed held out). Without folds: the main split.
+    ``workers``: processes that fit the folds side by side (diagnosis/parallel.py)."""
     pairs = list(splits) if splits else [(train, heldout)]
     step_of = {fit.active[-1]: step for step, fit in enumerate(path) if step}
     summary = {e.name: e.summary for e in family.effects}
@@ -107,13 +110,14 @@ def rivals(family: Family, kept: Fit, path: list[Fit], scores: list[CandidateSco
                            len(heldout)) >= PRESCREEN * RIVAL_Z:
                     continue
                 if not kept_on:
-                    kept_on = [family.residual(fit_model(family, kept.active, tr, he,
-                                                         kept.params, fixed).params, he)
-                               for tr, he in pairs]
-                terms = []
-                for (tr, he), r_kept in zip(pairs, kept_on):
-                    fold, _ = fit_identified(family, active, tr, he, swap.params, fixed)
-                    terms.append(_row_terms(r_kept, family.residual(fold.params, he), len(he)))
+                    kept_on = [family.residual(f.params, he) for f, (_, he) in zip(results(
+                        run_all([partial(fit_model, family, kept.active, tr, he, kept.params,
+                                         fixed) for tr, he in pairs], workers)), pairs)]
+                folds = results(run_all([partial(fit_identified, family, active, tr, he,
+                                                 swap.params, fixed) for tr, he in pairs],
+                                        workers))
+                terms = [_row_terms(r_kept, family.residual(fold.params, he), len(he))
+                         for (_, he), r_kept, (fold, _) in zip(pairs, kept_on, folds)]
             except (np.linalg.LinAlgError, ValueError):
                 continue
             z = _z(np.concatenate(terms))

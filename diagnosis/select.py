@@ -29,8 +29,9 @@ a structured residual remains they stay the training fit's.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 import scipy.stats
@@ -42,6 +43,7 @@ from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.findings import excess, findings_of, param_estimates, shares, verdict
 from serpar.diagnosis.fit import Fit, earns, fit_model
 from serpar.diagnosis.locate import chi2_p
+from serpar.diagnosis.parallel import run_all
 from serpar.diagnosis.reselect import barred_reason, passed_over
 from serpar.diagnosis.residual import check_residual, noise_like_but_explained
 from serpar.diagnosis.result import CandidateScore, Diagnosis, Finding
@@ -70,12 +72,18 @@ class SelectConfig:
     folds: int = N_FOLDS
     """Resampled folds on which a selected effect must hold up (0: no resampling; a selected
     effect then has only to be off its search bounds and material to be reported as found)."""
+    workers: int = 0
+    """Processes that fit one step's candidates and the folds' models side by side
+    (diagnosis/parallel.py; 0: one per core, 1: in this process). The numbers are the same."""
 
     def __post_init__(self) -> None:
         if not 0 < self.alpha < 1:
             raise IdentificationError(f"SelectConfig.alpha must be in (0, 1), got {self.alpha}")
         if self.max_effects < 0:
             raise IdentificationError("SelectConfig.max_effects must be >= 0")
+        if self.workers < 0:
+            raise IdentificationError(f"SelectConfig.workers={self.workers}: 0 (every core) "
+                                      "or >= 1")
         if self.folds < 0 or self.folds == 1:
             raise IdentificationError(f"SelectConfig.folds={self.folds}: 0 (off) or >= 2")
 
@@ -99,19 +107,38 @@ def beyond_noise(family: Family, fit: Fit, heldout: np.ndarray, alpha: float) ->
     return any(chi2_p(part) < alpha for part in parts(heldout, whitened).values())
 
 
+Tried = dict[tuple[object, ...], tuple[bool, object]]
+"""Candidate fits already made on one split, by what they were fitted from
+(:func:`_fit_key`): a second selection (without a barred effect) starts as the first did."""
+
+
+def _fit_key(active: tuple[str, ...], start: Mapping[str, np.ndarray],
+             fixed: Mapping[str, Effect]) -> tuple[object, ...]:
+    return (active,
+            tuple((k, np.asarray(v, float).tobytes()) for k, v in sorted(start.items())),
+            tuple((n, e.fixed, e.param_names, e.x0.tobytes(), e.lower.tobytes(),
+                   e.upper.tobytes()) for n, e in sorted(fixed.items())))
+
+
 def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
                    cfg: SelectConfig, report: Progress | None = None,
-                   barred: frozenset[str] = frozenset()
+                   barred: frozenset[str] = frozenset(), tried_before: Tried | None = None
                    ) -> tuple[list[Fit], list[CandidateScore], dict[str, Effect]]:
     """The sequence of fits (baseline first, then one added effect per step), the score of
     every candidate tried at every step, and the selected effects with the parameters the
     data do not identify held at zero (:func:`~serpar.diagnosis.stability.fit_identified`);
-    ``barred`` effects are not tried."""
+    ``barred`` effects are not tried. ``tried_before``: the candidate fits of an earlier
+    selection on the same split, reused where a candidate starts from the same model (and
+    the fits made here are added to it)."""
     say = report or (lambda _msg: None)
+    memo: Tried = {} if tried_before is None else tried_before
     say("baseline")
-    path = [fit_model(family, (), train, heldout)]
+    if ("baseline",) not in memo:
+        memo[("baseline",)] = (True, fit_model(family, (), train, heldout))
+    path: list[Fit] = [memo[("baseline",)][1]]  # type: ignore[list-item]
     scores: list[CandidateScore] = []
     fixed: dict[str, Effect] = {}
+    took: dict[str, float] = {}  # each candidate's last fit [s]
     step = 0
     while step < cfg.max_effects and beyond_noise(family, path[-1], heldout, cfg.alpha):
         step += 1
@@ -120,15 +147,38 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
         tried = [e for e in family.effects if e.name not in current.active
                  and e.name not in barred]
         held = ", ".join(current.active) or "nothing yet"
-        for k, effect in enumerate(tried):
-            say(f"step {step} (holding {held}): candidate {k + 1} of {len(tried)}, {effect.name}")
-            try:
-                new, new_fixed = fit_identified(family, current.active + (effect.name,), train,
-                                                heldout, current.params, fixed)
-            except (np.linalg.LinAlgError, ValueError) as exc:
+
+        def event(what: str, k: int, step: int = step, held: str = held) -> None:
+            if what == "start":
+                say(f"step {step} (holding {held}): candidate {k + 1} of {len(tried)}, "
+                    f"{tried[k].name}")
+
+        keys = [_fit_key(current.active + (e.name,), current.params, fixed) for e in tried]
+        todo = [k for k, key in enumerate(keys) if key not in memo]
+        jobs = [partial(fit_identified, family, current.active + (tried[k].name,), train,
+                        heldout, current.params, fixed) for k in todo]
+        if len(todo) < len(tried):
+            say(f"step {step} (holding {held}): {len(tried) - len(todo)} of {len(tried)} "
+                "candidates as fitted before")
+        # the longest first (as long as the last step took, else by its parameters): a
+        # step ends with its slowest fit
+        first = sorted(range(len(todo)), key=lambda j: -took.get(
+            tried[todo[j]].name, 1e-3 * tried[todo[j]].n_params))
+        seconds: dict[int, float] = {}
+        for k, outcome in zip(todo, run_all(jobs, cfg.workers,
+                                             lambda what, j: event(what, todo[j]), first,
+                                             seconds)):
+            memo[keys[k]] = outcome
+        took.update({tried[todo[j]].name: dt for j, dt in seconds.items()})
+        for effect, key in zip(tried, keys):
+            ok_fit, got = memo[key]
+            if not ok_fit:
+                if not isinstance(got, (np.linalg.LinAlgError, ValueError)):
+                    raise got
                 # one candidate that cannot be fitted here is a finding, not a crash
-                say(f"{effect.name} failed: {exc}")
+                say(f"{effect.name} failed: {got}")
                 continue
+            new, new_fixed = got
             d_bic, d_held, ok = earns(current, new)
             scores.append(CandidateScore(step, effect.name, effect.n_params, d_bic, d_held,
                                          new.heldout_rms, ok))
@@ -145,15 +195,21 @@ def forward_select(family: Family, train: np.ndarray, heldout: np.ndarray,
     return path, scores, fixed
 
 
+def default_config(family: Family, workers: int = 0) -> SelectConfig:
+    """The selection's defaults for ``family``, on ``workers`` processes (0: every core)."""
+    # a family whose recordings hold several independent parts (an episode: the arm's
+    # dynamics and its insertions) may allow more effects; each must still earn its place
+    return SelectConfig(max_effects=getattr(family, "max_effects", SelectConfig.max_effects),
+                        workers=workers)
+
+
 def diagnose(family: Family, seed: int = 0, cfg: SelectConfig | None = None,
              report: Progress | None = None) -> Diagnosis:
     """Run every stage on one family; the result holds the findings and the evidence."""
     # The fits are small (hundreds of rows, tens of columns): OpenBLAS threads on a shared
     # 2-core machine only wait for each other (a 28-parameter fit: 3.5 s against 0.17 s).
     if cfg is None:
-        # a family whose recordings hold several independent parts (an episode: the arm's
-        # dynamics and its insertions) may allow more effects; each must still earn its place
-        cfg = SelectConfig(max_effects=getattr(family, "max_effects", SelectConfig.max_effects))
+        cfg = default_config(family)
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(family, seed, cfg, report)
 
@@ -171,14 +227,15 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
                                   f"{heldout.size} held-out rows; both must be non-empty")
     if np.intersect1d(train, heldout).size:
         raise IdentificationError(f"{family.kind}: training and held-out rows overlap")
-    sel = _select(family, train, heldout, splits, cfg, report)
+    tried: Tried = {}
+    sel = _select(family, train, heldout, splits, cfg, report, tried_before=tried)
     failed = [n for n in sel.path[-1].active if n not in sel.kept.active]
     barred = passed_over(sel.path[-1].active, sel.scores, failed)
     set_aside: list[Finding] = []
     if barred:
         if report:
             report(f"selecting again without {', '.join(barred)}")
-        again = _select(family, train, heldout, splits, cfg, report, frozenset(barred))
+        again = _select(family, train, heldout, splits, cfg, report, frozenset(barred), tried)
         if again.kept.heldout_rms < sel.kept.heldout_rms:
             first = findings_of(family, sel.path, sel.shares, sel.assessed, sel.fixed, sel.kept, {})
             set_aside = [replace(f, established=False,
@@ -230,7 +287,7 @@ def _diagnose(family: Family, seed: int, cfg: SelectConfig, report: Progress | N
         if report:
             report("rivals")
         for name, rival in rivals(family, kept, path, scores, fixed, train, heldout,
-                                  splits).items():
+                                  splits, cfg.workers).items():
             demoted[name] = demoted.get(name, ()) + (
                 rival.words() + f"; the model carries {name}",)
     if residual.structured is False and empirical is not None:
@@ -286,9 +343,11 @@ class _Selection:
 
 def _select(family: Family, train: np.ndarray, heldout: np.ndarray,
             splits: list[tuple[np.ndarray, np.ndarray]], cfg: SelectConfig,
-            report: Progress | None, barred: frozenset[str] = frozenset()) -> _Selection:
+            report: Progress | None, barred: frozenset[str] = frozenset(),
+            tried_before: Tried | None = None) -> _Selection:
     """Forward selection, held parameters released, every selected effect judged."""
-    path, scores, fixed = forward_select(family, train, heldout, cfg, report, barred)
+    path, scores, fixed = forward_select(family, train, heldout, cfg, report, barred,
+                                         tried_before)
     if fixed:
         path[-1], fixed = release_held(family, path[-1], fixed, train, heldout, report)
     effect_shares = shares(family, path, heldout)
@@ -296,5 +355,5 @@ def _select(family: Family, train: np.ndarray, heldout: np.ndarray,
         report(f"resampling {len(splits)} folds")
     # the model (and the file written from it) holds the established effects only
     kept, assessed, fixed = assess(family, path[-1], {n: s[1] for n, s in effect_shares.items()},
-                                   splits, train, heldout, fixed, report)
+                                   splits, train, heldout, fixed, report, cfg.workers)
     return _Selection(path, scores, fixed, effect_shares, kept, assessed)

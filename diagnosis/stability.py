@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +33,7 @@ from numpy.typing import NDArray
 from serpar.diagnosis.channel_check import ChannelCheck, channel_check
 from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.fit import Fit, blocks_of, earns, fit_model
+from serpar.diagnosis.parallel import run_all
 from serpar.diagnosis.phase_consistency import phase_reasons
 
 Rows = NDArray[np.int64]
@@ -164,7 +166,8 @@ def release_held(family: Family, fit: Fit, fixed: Mapping[str, Effect], train: R
 
 def resample(family: Family, final: Fit, splits: list[tuple[Rows, Rows]],
              overrides: Mapping[str, Effect] | None = None,
-             report: Callable[[str], None] | None = None) -> dict[str, Resampled]:
+             report: Callable[[str], None] | None = None, workers: int = 0
+             ) -> dict[str, Resampled]:
     """Each effect of ``final`` on each split: fitted with the others, whether it still earns
     its parameters over the model refitted without it, and whether it predicts the same thing
     (its contribution to the residual over all rows, cosine >= MIN_AGREEMENT with the main
@@ -177,23 +180,43 @@ def resample(family: Family, final: Fit, splits: list[tuple[Rows, Rows]],
     tried = {n: 0 for n in names}
     values: dict[str, list[NDArray[np.float64]]] = {n: [] for n in names}
     agree: dict[str, list[float]] = {n: [] for n in names}
-    for k, (train, held) in enumerate(splits):
-        if report:
-            report(f"fold {k + 1} of {len(splits)}: {', '.join(names)}, each with and without")
-        full = fit_model(family, names, train, held, start, overrides)
+    say = report or (lambda _msg: None)
+    # every fold's model first, then every model without one effect: each a fit of its own
+    fulls = _fits(family, [(names, tr, held) for tr, held in splits], start, overrides, workers,
+                  lambda k: say(f"fold {k + 1} of {len(splits)}: {', '.join(names)}"))
+    without = [(k, n) for k, (_, held) in enumerate(splits) for n in names
+               # a fold that holds out none of the rows it acts on cannot test it
+               if np.any(_contribution(family, fulls[k].params, n, held))]
+    refits = _fits(family, [(tuple(a for a in names if a != n), *splits[k]) for k, n in without],
+                   start, overrides, workers,
+                   lambda j: say(f"fold {without[j][0] + 1} of {len(splits)}: "
+                                 f"without {without[j][1]}"))
+    for (k, n), less in zip(without, refits):
+        tried[n] += 1
+        if earns(less, fulls[k])[2]:
+            kept[n] += 1
+            agree[n].append(_cosine(_contribution(family, fulls[k].params, n, every), main[n]))
+    for full in fulls:
         for n in names:
             values[n].append(np.asarray(full.params[n], float))
-            if not np.any(_contribution(family, full.params, n, held)):
-                continue  # a fold that holds out none of the rows it acts on cannot test it
-            tried[n] += 1
-            without = fit_model(family, tuple(a for a in names if a != n), train, held, start,
-                                overrides)
-            if earns(without, full)[2]:
-                kept[n] += 1
-                agree[n].append(_cosine(_contribution(family, full.params, n, every), main[n]))
     return {n: Resampled(n, tried[n], kept[n], np.array(values[n]),
                          all(a >= MIN_AGREEMENT for a in agree[n]))
             for n in names}
+
+
+def _fits(family: Family, models: list[tuple[tuple[str, ...], Rows, Rows]],
+          start: Mapping[str, NDArray[np.float64]], overrides: Mapping[str, Effect] | None,
+          workers: int, started: Callable[[int], None]) -> list[Fit]:
+    """:func:`fit_model` of each (effects, training rows, held-out rows), side by side
+    (diagnosis/parallel.py), in order; a fit that raises raises here."""
+    jobs = [partial(fit_model, family, active, tr, held, start, overrides)
+            for active, tr, held in models]
+    out = []
+    for ok, got in run_all(jobs, workers, lambda what, k: started(k) if what == "start" else None):
+        if not ok:
+            raise got
+        out.append(got)
+    return out
 
 
 def _contribution(family: Family, params: Mapping[str, NDArray[np.float64]], name: str,
@@ -249,8 +272,8 @@ class Assessment:
 
 def assess(family: Family, final: Fit, share_of_remaining: Mapping[str, float],
            splits: list[tuple[Rows, Rows]], train: Rows, heldout: Rows,
-           overrides: Mapping[str, Effect], report: Callable[[str], None] | None = None
-           ) -> tuple[Fit, dict[str, Assessment], dict[str, Effect]]:
+           overrides: Mapping[str, Effect], report: Callable[[str], None] | None = None,
+           workers: int = 0) -> tuple[Fit, dict[str, Assessment], dict[str, Effect]]:
     """Judge every effect of ``final``; drop the least needed one that does not hold up, refit
     the rest on the main split and judge them again in that model (an effect must neither ride
     on nor be spoiled by one that trades against it), until every effect left holds up. Returns the model of
@@ -259,7 +282,7 @@ def assess(family: Family, final: Fit, share_of_remaining: Mapping[str, float],
     out: dict[str, Assessment] = {}
     fit, overrides = final, dict(overrides)
     while fit.active:
-        res = resample(family, fit, splits, overrides, report) if splits else {}
+        res = resample(family, fit, splits, overrides, report, workers) if splits else {}
         failing = []
         for name in fit.active:
             effect = block_of(family, fit.active, name, overrides)
@@ -268,7 +291,7 @@ def assess(family: Family, final: Fit, share_of_remaining: Mapping[str, float],
                                           share_of_remaining[name],
                                           channel_check(family, fit.params, name, heldout))
             if not why:  # only then: it refits the model per phase
-                why = phase_reasons(family, fit, name, train, heldout, overrides, report)
+                why = phase_reasons(family, fit, name, train, heldout, overrides, report, workers)
             out[name] = Assessment(tuple(why), r, fit)
             if why:
                 failing.append((r.frequency if r is not None else 1.0, -fit.active.index(name),

@@ -61,7 +61,7 @@ def test_a_diagnosis_stopped_by_ctrl_c_says_where_and_gives_no_verdict(tmp_path,
     capsys.readouterr()
     import serpar.cli.cmd_diagnose as cmd
 
-    def stopped(family, seed, report):
+    def stopped(family, seed, cfg, report):
         report("baseline")
         report("candidate thermal_drift")
         raise KeyboardInterrupt
