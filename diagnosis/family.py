@@ -13,7 +13,7 @@ final fit's parameters (block name -> values) to files named ``<stem>.<what>``; 
 :func:`export_model_files`. Families without it are untouched. Likewise
 ``residual_parts(rows, whitened) -> {name: entries}``: independent parts of the data (an
 episode's arm channels and its chamfer slides) that selection tests against noise one by one
-(:func:`serpar.diagnosis.select.beyond_noise`).
+(:func:`serpar.diagnosis.forward.beyond_noise`).
 """
 
 from __future__ import annotations
