@@ -41,3 +41,10 @@ def workers(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"{value}: workers are 1, 2, ... local processes")
     return value
+
+
+def add_fit_workers(p: argparse.ArgumentParser) -> None:
+    """``--workers N`` of a command that diagnoses (diagnose, sim2real)."""
+    p.add_argument("--workers", type=workers, default=0,
+                   help="local processes that fit the diagnosis's candidates and resampled "
+                        "folds side by side (default: one per core; the findings are the same)")

@@ -61,8 +61,7 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--withhold", action="append", default=[], metavar="EFFECT",
                    help="diagnose without this candidate (repeatable): how the verdict reads "
                         "where the library lacks a form, as the blind bench's withheld trials")
-    p.add_argument("--workers", type=arg_types.workers, default=0,
-                   help="local processes that fit the diagnosis's candidates and resampled folds side by side (default: one per core; the findings are the same)")
+    arg_types.add_fit_workers(p)
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_diagnose)
     return p

@@ -45,8 +45,7 @@ def register(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--report", metavar="OUT.html", help="write the HTML report (table, plots)")
     p.add_argument("--seed", type=arg_types.seed, default=0,
                    help="seed of the diagnosis's split, and of the parts where a log has no seed")
-    p.add_argument("--workers", type=arg_types.workers, default=0,
-                   help="local processes that fit the diagnosis's candidates and resampled folds side by side (default: one per core; the findings are the same)")
+    arg_types.add_fit_workers(p)
     add_force(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_sim2real)

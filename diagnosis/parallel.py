@@ -43,13 +43,18 @@ def _quiet_worker() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _run(i: int) -> tuple[int, tuple[bool, object], float]:
+def _timed(job: Callable[[], object]) -> tuple[tuple[bool, object], float]:
     t0 = time.perf_counter()
     try:
-        outcome: tuple[bool, object] = (True, _JOBS[i]())
+        outcome: tuple[bool, object] = (True, job())
     except Exception as exc:  # noqa: BLE001 - the caller decides what a failed fit means
         outcome = (False, exc)
-    return i, outcome, time.perf_counter() - t0
+    return outcome, time.perf_counter() - t0
+
+
+def _run(i: int) -> tuple[int, tuple[bool, object], float]:
+    """Job ``i`` of :data:`_JOBS`, in a worker."""
+    return (i, *_timed(_JOBS[i]))
 
 
 Event = Callable[[str, int], None]
@@ -69,11 +74,9 @@ def run_all(jobs: Sequence[Callable[[], T]], workers: int = 0, event: Event | No
     n = min(workers or cores(), len(jobs))
     if n <= 1 or not can_fork():
         out: list[tuple[bool, T | Exception]] = []
-        for i in range(len(jobs)):
+        for i, job in enumerate(jobs):
             tell("start", i)
-            _JOBS = jobs
-            _, outcome, took[i] = _run(i)
-            _JOBS = ()
+            outcome, took[i] = _timed(job)
             out.append(outcome)  # type: ignore[arg-type]
             tell("done", i)
         return out

@@ -22,12 +22,11 @@ from serpar.diagnosis.empirical import characterise
 from serpar.diagnosis.empirical_refit import model_refit, outweighed
 from serpar.diagnosis.family import Effect, Family
 from serpar.diagnosis.findings import excess, findings_of, param_estimates, shares, verdict
-from serpar.diagnosis.fit import Fit, earns, fit_model  # noqa: F401 - earns: for callers
-from serpar.diagnosis.forward import (  # noqa: F401 - re-exported: callers import them here
+from serpar.diagnosis.fit import Fit, fit_model
+from serpar.diagnosis.forward import (
     Progress,
     SelectConfig,
     Tried,
-    at_noise_floor,
     beyond_noise,
     forward_select,
 )

@@ -23,8 +23,9 @@ from serpar.diagnosis.arm_dynamics_family import (
 )
 from serpar.diagnosis.arm_dynamics_payload import payload_inertial, payload_model, set_payload
 from serpar.diagnosis.family import Family
-from serpar.diagnosis.fit import fit_model
-from serpar.diagnosis.select import at_noise_floor, diagnose, earns
+from serpar.diagnosis.fit import earns, fit_model
+from serpar.diagnosis.forward import at_noise_floor
+from serpar.diagnosis.select import diagnose
 from serpar.errors import ConfigError, IdentificationError
 from serpar.sim import channels as ch
 from serpar.sim.plants.arm_changes import inertia_from_extent, inertia_problem

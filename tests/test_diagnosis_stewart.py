@@ -17,8 +17,8 @@ from serpar.calibration.stewart_params import load_stewart_parameters
 from serpar.cli.entry import main
 from serpar.diagnosis.choose import family_from_recording
 from serpar.diagnosis.family import Family
-from serpar.diagnosis.fit import fit_model
-from serpar.diagnosis.select import diagnose, earns
+from serpar.diagnosis.fit import earns, fit_model
+from serpar.diagnosis.select import diagnose
 from serpar.diagnosis.stewart_effects import geometry_flat_index
 from serpar.diagnosis.stewart_family import AXES, StewartFamily
 from serpar.errors import ConfigError, IdentificationError
