@@ -18,7 +18,8 @@ evaluated with ``mj_rne`` and no hand-written dynamics:
 * a tilted base turns gravity (arm_dynamics_tilt.py: exact, MuJoCo's gravity torque per axis);
 * latency shifts the windowed command (a cubic spline) by the delay;
 * sensor timing shifts the link channel's model by the torque sensors' lag behind the
-  encoders, to first order (minus lag x the windowed rate of the nominal link torque);
+  encoders: the windowed nominal link torque read from a cubic spline through it, what a
+  payload or link inertia error adds to first order;
 * encoder offsets and scale errors are evaluated exactly per call, ``mj_rne`` at the true
   angles (and, for a scale, rates) of the rows asked for (a few hundred), so no linearisation
   error enters a fit.
@@ -52,6 +53,7 @@ from serpar.diagnosis.arm_dynamics_payload import (
     payload_inertial,
     standard_parameters,
 )
+from serpar.diagnosis.arm_dynamics_signals import windowed_spline
 from serpar.diagnosis.arm_dynamics_sigmoid import NAME as SIGMOID
 from serpar.diagnosis.arm_dynamics_sigmoid import SigmoidFriction
 from serpar.diagnosis.arm_dynamics_stribeck import StribeckFall
@@ -125,9 +127,10 @@ class EffectModels:
         self.flange = np.asarray(dynamics.arm.flange_pos, float)
         self.payload_link, self.payload_drive = payload.link, payload.drive
         self.payload_mass, self.payload_link_rate = payload.mass, payload.link_rate
-        # sensor timing: a link torque read `lag` late is the model's, minus lag x its rate
+        # sensor timing: a link torque read `lag` late is the windowed nominal model's `lag`
+        # earlier (a cubic spline through it at every sample, as the latency reads the command)
         full = dynamics.link_torque(terms.q_full, terms.dq_full, terms.a_full)
-        self.link_rate = link_rate(terms, full)
+        self.link_spline = windowed_spline(terms.rows, full, link=True)
         self._offset_cols = np.array(offset_joints, np.int64) - 1
         self._scale_cols = np.array(scale_joints, np.int64) - 1
         self._memo: Memo[tuple[Vec, Vec]] = Memo()
@@ -169,7 +172,7 @@ class EffectModels:
         band = np.zeros((len(rows), n))
         link_band = np.zeros((len(rows), n))
         if "sensor_timing" in params:
-            link -= self._link_rate(params, rows) * params["sensor_timing"][0]
+            link += self._read_late(params, rows)
         if "joint_friction" in params:
             p = params["joint_friction"]
             drive += self.coulomb[rows] * p[:n] + self.viscous[rows] * p[n:]
@@ -263,16 +266,22 @@ class EffectModels:
             return t.q_link[rows], t.dq_link[rows], t.ddq_link[rows]
         return t.q[rows], t.dq[rows], t.ddq[rows]
 
-    def _link_rate(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
-        """The rate of the link torque the sensors read late: the nominal model's and what a
-        payload or a link inertia error adds to it (a lag read against the nominal rate alone
-        takes the extra torque's rate for more lag: +2 % with 0.125 kg on the hand)."""
-        rate = self.link_rate[rows]
+    def _read_late(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
+        """What the link channel's model changes by when the sensors read ``lag`` late: the
+        nominal model's windowed torque ``lag`` earlier minus now (exact but for the spline: at
+        1.6 ms a first-order shift leaves lag^2/2 x its second derivative, ~2 sigma on the most
+        loaded joints of a 12-hole cell), and lag x the rate of what a payload or a link
+        inertia error adds (a lag read against the nominal torque alone takes the extra
+        torque's rate for more lag: +2 % with 0.125 kg on the hand; its second order is
+        negligible beside the nominal's)."""
+        lag = float(params["sensor_timing"][0])
+        centre = self.terms.rows.centre[rows].astype(float)
+        late = self.link_spline(centre - lag * self.terms.rate) - self.link_spline(centre)
         if "payload" in params:
-            rate = rate + self.payload_link_rate[rows] @ self._payload(params)
+            late -= lag * (self.payload_link_rate[rows] @ self._payload(params))
         if "link_inertia" in params:
-            rate = rate + self.inertia_link_rate[rows] @ params["link_inertia"]
-        return rate
+            late -= lag * (self.inertia_link_rate[rows] @ params["link_inertia"])
+        return late
 
     def misread_sensitivity(self, joint: int, sensor: bool, proportional: bool,
                             step: float = 1e-5) -> Vec:

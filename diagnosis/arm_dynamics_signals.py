@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.signal
+from scipy.interpolate import BSpline, make_interp_spline
+from scipy.ndimage import correlate1d
 from numpy.typing import NDArray
 
 from serpar.errors import IdentificationError
@@ -269,6 +271,20 @@ class Rows:
         shifted[1:] = 0.5 * (x[1:] + x[:-1])
         shifted[0] = x[0]
         return self.at(shifted)
+
+
+def windowed_spline(rows: Rows, x: Vec, link: bool = False) -> BSpline:
+    """A cubic spline through the window mean of the full-rate series ``x`` at every sample
+    (``link``: moved half a sample back first, as :meth:`Rows.link_at`), in samples: read at a
+    row's centre it is that row's windowed value, and between samples it shifts the window by a
+    fraction of a sample (a lag or a delay)."""
+    if link:
+        shifted = np.empty_like(x)
+        shifted[1:] = 0.5 * (x[1:] + x[:-1])
+        shifted[0] = x[0]
+        x = shifted
+    windowed = correlate1d(x, rows.kernel, axis=0, mode="nearest")
+    return make_interp_spline(np.arange(len(windowed), dtype=float), windowed, k=3)
 
 
 def full_rate_derivatives(q: Vec, rate: float) -> tuple[Vec, Vec]:

@@ -28,8 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import BSpline, make_interp_spline
-from scipy.ndimage import correlate1d
+from scipy.interpolate import BSpline
 
 from serpar.diagnosis.arm_dynamics_payload import load_torque
 from serpar.diagnosis.arm_dynamics_signals import (
@@ -39,6 +38,7 @@ from serpar.diagnosis.arm_dynamics_signals import (
     SmoothingConfig,
     full_rate_derivatives,
     noise_gains,
+    windowed_spline,
 )
 from serpar.sim.rigid_arm import ArmDynamics, DynamicsSeries
 
@@ -133,9 +133,7 @@ def compute_terms(series: ArmSeries, cfg: SmoothingConfig | None = None,
     sigma_tau = np.nan_to_num(series.sigma_tau, nan=1.0)  # no tau_J: nothing reads its sigma
     measurement_var = np.vstack([(g_link * sigma_tau) ** 2, (g_cmd * series.sigma_cmd) ** 2])
     sigma_link, sigma_drive = row_sigma(measurement_var, acc_var, m_link, m_full)
-    # the windowed command at every sample (symmetric kernel: correlation = convolution)
-    windowed = correlate1d(cmd_mean, rows.kernel, axis=0, mode="nearest")
-    spline = make_interp_spline(np.arange(len(windowed), dtype=float), windowed, k=3)
+    spline = windowed_spline(rows, cmd_mean)  # the windowed command, between samples too
     return Terms(rows=rows, time=series.time[rows.centre], link=link, drive=drive,
                  sigma_link=sigma_link, sigma_drive=sigma_drive, measurement_var=measurement_var,
                  acc_var=acc_var, mass_link=m_link, mass_full=m_full, q=q_r, dq=dq_r, ddq=ddq_r,
