@@ -134,7 +134,7 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
             model, after, checked = confirmed_update(
                 episodes, real_outcomes, before, after, updated, model,
                 model_from_config(nominal, start_model or "the nominal cell"), carried, out, step)
-            dropped = [c.effect for c in checked if not c.confirmed]
+            dropped = [c.effect for c in checked if c.dropped]
             if dropped:
                 model_path, exported = write_updated(model, out)
                 contact = updated_contact_friction(model)
@@ -143,7 +143,9 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     words = (verdict(before, after, [e for e in carried if e not in dropped])
              + carried_words(diag, model)
              + (f"; dropped after the rerun (the outcomes they move moved away from the cell): "
-                f"{', '.join(dropped)}" if dropped else ""))
+                f"{', '.join(dropped)}" if dropped else "")
+             + "".join(f"; {c.effect} not confirmed on holes {', '.join(map(str, c.holes))} but "
+                       f"kept: {c.kept_because}" for c in checked if c.kept_because))
     if report is not None:
         write_sim2real_report(report, str(real), before, after, found, notes, words)
     if args.json:

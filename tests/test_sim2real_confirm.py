@@ -6,7 +6,14 @@ from __future__ import annotations
 import pytest
 
 from serpar.checks.sim2real import OutcomeDiff
-from serpar.checks.sim2real_confirm import away_from_cell, judge, to_confirm, without_effect
+from serpar.checks.sim2real_confirm import (
+    away_from_cell,
+    confirm_holes,
+    judge,
+    to_confirm,
+    without_effect,
+    worse_without,
+)
 from serpar.diagnosis.result import Finding
 from serpar.diagnosis.task_outcomes import OUTCOMES, HoleOutcome
 from serpar.sim.model_file import DiagnosisModel, ParamBlock
@@ -77,3 +84,34 @@ def test_the_carried_one_of_an_a_or_b_pair_is_confirmed_too() -> None:
     assert to_confirm(["latency"], 0.41, [latency, payload, link], ["latency", "payload"]) == \
         ["latency", "contact_friction", "payload"]
     assert to_confirm(["contact_friction"], 0.41, [payload], []) == ["contact_friction"]
+
+
+def test_only_the_outcomes_the_update_moved_away_are_judged() -> None:
+    """The update left the insertion's time from contact to seated further from the cell: an
+    effect is judged on that outcome alone, not on a grasp the two holes happen to differ in."""
+    before = _diffs(contact_to_seated=(0.005, 0.006), seated=(-0.5, 0.33))
+    real = _holes(contact_to_seated=[0.678, 0.679], seated=[1.0, 1.0])
+    with_it = _holes(contact_to_seated=[0.679, 0.678], seated=[0.0, 0.0])
+    without = _holes(contact_to_seated=[0.671, 0.672], seated=[1.0, 1.0])
+    assert not judge("stribeck_friction", real, with_it, without, before).confirmed
+    c = judge("stribeck_friction", real, with_it, without, before, ["contact_to_seated"])
+    assert c.confirmed and set(c.moves) == {"contact_to_seated"}
+
+
+def test_the_holes_rerun_are_ones_both_seated_where_an_insertion_outcome_is_judged() -> None:
+    real = _holes(seated=[1.0, 1.0, 0.0, 1.0, 1.0, 1.0])
+    updated = _holes(seated=[0.0, 0.0, 1.0, 1.0, 0.0, 1.0])
+    assert confirm_holes(real, updated, ["contact_to_seated"]) == [3, 5]
+    assert confirm_holes(real, updated, ["seated"]) == [0, 1]  # every hole has a seated outcome
+    assert confirm_holes(real, _holes(seated=[0.0] * 6), ["seated_depth"]) == [0, 1]  # none: the first
+
+
+def test_a_drop_that_leaves_more_outcomes_outside_is_undone() -> None:
+    """Rerun on every hole without the unconfirmed effects, the outcomes went further: the few
+    holes that judged each effect are outweighed and the update stays whole."""
+    after = _diffs(contact_to_seated=(-0.009, 0.006))
+    nominal_like = _diffs(seated=(-0.5, 0.33), seated_depth=(0.34, 0.01),
+                          peak_lateral_force=(0.87, 0.02))
+    why = worse_without(after, nominal_like, ["payload", "armature"])
+    assert "3 outcome(s)" in why and "the update 1" in why
+    assert worse_without(after, _diffs(), ["payload"]) == ""  # fewer outside: the drop stands
