@@ -131,6 +131,7 @@ class EffectModels:
         # earlier (a cubic spline through it at every sample, as the latency reads the command)
         full = dynamics.link_torque(terms.q_full, terms.dq_full, terms.a_full)
         self.link_spline = windowed_spline(terms.rows, full, link=True)
+        self.link_now = self.link_spline(terms.rows.centre.astype(float))
         self._offset_cols = np.array(offset_joints, np.int64) - 1
         self._scale_cols = np.array(scale_joints, np.int64) - 1
         self._memo: Memo[tuple[Vec, Vec]] = Memo()
@@ -276,7 +277,7 @@ class EffectModels:
         negligible beside the nominal's)."""
         lag = float(params["sensor_timing"][0])
         centre = self.terms.rows.centre[rows].astype(float)
-        late = self.link_spline(centre - lag * self.terms.rate) - self.link_spline(centre)
+        late = self.link_spline(centre - lag * self.terms.rate) - self.link_now[rows]
         if "payload" in params:
             late -= lag * (self.payload_link_rate[rows] @ self._payload(params))
         if "link_inertia" in params:

@@ -267,10 +267,16 @@ class Rows:
 
     def link_at(self, x: Vec) -> Vec:
         """Window mean of x at each row, x first moved half a sample back (period mean)."""
-        shifted = np.empty_like(x)
-        shifted[1:] = 0.5 * (x[1:] + x[:-1])
-        shifted[0] = x[0]
-        return self.at(shifted)
+        return self.at(half_sample_back(x))
+
+
+def half_sample_back(x: Vec) -> Vec:
+    """The full-rate series x moved half a sample back: the mean of each sample and the one
+    before (the link-side sensor's period mean); the first sample kept."""
+    shifted = np.empty_like(x)
+    shifted[1:] = 0.5 * (x[1:] + x[:-1])
+    shifted[0] = x[0]
+    return shifted
 
 
 def windowed_spline(rows: Rows, x: Vec, link: bool = False) -> BSpline:
@@ -278,12 +284,8 @@ def windowed_spline(rows: Rows, x: Vec, link: bool = False) -> BSpline:
     (``link``: moved half a sample back first, as :meth:`Rows.link_at`), in samples: read at a
     row's centre it is that row's windowed value, and between samples it shifts the window by a
     fraction of a sample (a lag or a delay)."""
-    if link:
-        shifted = np.empty_like(x)
-        shifted[1:] = 0.5 * (x[1:] + x[:-1])
-        shifted[0] = x[0]
-        x = shifted
-    windowed = correlate1d(x, rows.kernel, axis=0, mode="nearest")
+    windowed = correlate1d(half_sample_back(x) if link else x, rows.kernel, axis=0,
+                           mode="nearest")
     return make_interp_spline(np.arange(len(windowed), dtype=float), windowed, k=3)
 
 
