@@ -17,10 +17,10 @@ import numpy as np
 
 from serpar.controllers.arm_controller import ArmController, ArmControllerConfig
 from serpar.controllers.arm_sensors import TorqueADC
+from serpar.controllers.gripper_servo import GripperServo
 from serpar.controllers.stewart_servo import StewartServo
 from serpar.errors import ConfigError, UnstableSimulation
 from serpar.sim import names
-from serpar.sim.arm import FINGER_JOINT_NAMES, GRIP_ACTUATOR, GRIP_FORCE_MAX
 from serpar.sim.collision_gate import CollisionGate
 from serpar.sim.plants.drive_friction import DriveFriction
 from serpar.sim.scene import Scene
@@ -34,44 +34,6 @@ GATE_EVERY = 5
 decision costs ~55 us of numpy, and its margin grows with what moved since the last one."""
 STEP_TIMER = int(mujoco.mjtTimer.mjTIMER_STEP)
 GATED_BODIES = (names.PLATE + "baseplate", names.TRAY + "tray")
-
-
-@dataclass
-class GripperServo:
-    """The hand's two modes, like the Franka Hand's `move(width)` and `grasp(force)`:
-    a PD on the jaw width, or a constant squeeze per pad [N]."""
-
-    actuator: int
-    finger_qpos: np.ndarray
-    finger_dof: np.ndarray
-    kp: float = 4000.0
-    """[N/m] on the jaw width: 1 mm error -> 4 N."""
-    kd: float = 20.0
-    width_target: float | None = 0.0
-    squeeze: float = 0.0
-
-    @classmethod
-    def from_model(cls, model: mujoco.MjModel) -> GripperServo:
-        joints = [model.joint(names.ARM + j) for j in FINGER_JOINT_NAMES]
-        return cls(model.actuator(names.ARM + GRIP_ACTUATOR).id,
-                   np.array([j.qposadr[0] for j in joints]), np.array([j.dofadr[0] for j in joints]))
-
-    def open_to(self, width: float) -> None:
-        self.width_target, self.squeeze = width, 0.0
-
-    def grasp(self, squeeze: float) -> None:
-        self.width_target, self.squeeze = None, squeeze
-
-    def width(self, data: mujoco.MjData) -> float:
-        return float(data.qpos[self.finger_qpos].sum())
-
-    def update(self, data: mujoco.MjData) -> None:
-        if self.width_target is None:
-            force = self.squeeze
-        else:  # positive ctrl closes the jaw
-            force = (self.kp * (self.width(data) - self.width_target)
-                     + self.kd * float(data.qvel[self.finger_dof].sum()))
-        data.ctrl[self.actuator] = float(np.clip(force, -GRIP_FORCE_MAX, GRIP_FORCE_MAX))
 
 
 Observer = Callable[["CellRuntime"], None]
@@ -133,7 +95,7 @@ class CellRuntime:
         if arm is None:
             arm = ArmController(scene.model, names.ARM, arm_config, seed)
             arm.hold_joints(scene.data.qpos[scene.arm_qpos_adr].copy())
-        rt = cls(scene, arm, GripperServo.from_model(scene.model), stewart)
+        rt = cls(scene, arm, GripperServo.from_model(scene.model, arm.dt), stewart)
         if gate:
             rt.gate = CollisionGate(scene.model, scene.data, GATED_BODIES)
             if transit:

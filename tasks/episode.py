@@ -129,7 +129,7 @@ class _Snapshot:
         self.state = np.empty(mujoco.mj_stateSize(m, self.spec))
         mujoco.mj_getState(m, d, self.state, self.spec)
         self.time, self.commanded = rt.time, plate.commanded.copy()
-        self.gripper = (rt.gripper.width_target, rt.gripper.squeeze)
+        self.gripper = rt.gripper.command()
         self.load = (rt.load_mass, rt.load_com.copy())
 
     def restore(self, rt: CellRuntime, plate: PlateCommander) -> None:
@@ -145,7 +145,7 @@ class _Snapshot:
         # read the restored arm: the next move starts from the measured pose, which would
         # otherwise be the broken cycle's last (a jump the arm answers at its torque limits)
         rt.arm.update(m, d)
-        rt.gripper.width_target, rt.gripper.squeeze = self.gripper
+        rt.gripper.resume(self.gripper)
         rt.set_load(*self.load)
 
 

@@ -9,6 +9,7 @@ import pytest
 from serpar.checks.vision_inhand_scenes import true_in_hand
 from serpar.controllers.arm_controller import controller_config
 from serpar.controllers.cell_runtime import CellRuntime
+from serpar.controllers.gripper_servo import GRASP_SPEED
 from serpar.errors import ConfigError, UnstableSimulation
 from serpar.sim import names
 from serpar.sim.arm import FINGER_BODIES, PAD_CONTYPE, PAD_GEOMS
@@ -173,3 +174,49 @@ def test_blow_up_is_named():
     rt.scene.data.qvel[0] = np.nan
     with pytest.raises(UnstableSimulation, match="t = "):
         rt.step()
+
+
+def _grasp_off_centre(offset: float) -> tuple[CellRuntime, float, float]:
+    """Conductor 0 grasped with the TCP ``offset`` off its axis along the closing direction:
+    the runtime after the grasp, the fastest finger and the part's fastest speed during it."""
+    rt = _runtime(1)
+    m, d = rt.scene.model, rt.scene.data
+    shoulder = d.site(f"{names.conductor(0)}shoulder").xpos.copy()  # test set-up, not vision
+    grasp = shoulder + [0, offset, GRASP_HEIGHT]  # the fingers close along y
+    rt.gripper.open_to(rt.scene.diameters.bodies[0] + 1.5e-3)
+    move_tcp(rt, grasp + [0, 0, 0.015], GRASP_ROT)
+    move_tcp(rt, grasp, GRASP_ROT, speed=0.05)
+    fingers = [m.joint(names.ARM + j).dofadr[0] for j in ("finger_left", "finger_right")]
+    part = m.body_dofadr[rt.scene.conductor_bodies[0]]
+    speeds: list[tuple[float, float]] = []
+    rt.observers.append(lambda r: speeds.append((float(np.abs(d.qvel[fingers]).max()),
+                                                float(np.linalg.norm(d.qvel[part:part + 3])))))
+    rt.gripper.grasp(20.0)
+    rt.run(0.25)
+    finger, moved = np.max(speeds, axis=0)
+    return rt, finger, moved
+
+
+@pytest.mark.parametrize("offset", [0.0, 3e-4, 4.5e-4], ids=["centred", "0.3 mm off", "0.45 mm off"])
+def test_a_grasp_closes_at_the_hands_speed_and_does_not_knock_the_part(offset):
+    """Within the pocket's play (the journal has 0.45 mm each way) the jaw closes at GRASP_SPEED
+    until the pads are blocked, then squeezes: no finger moves faster than the hand closes (an
+    instant 20 N squeeze threw them at the part at up to 0.9 m/s, knocked an off-centre part
+    across its pocket at ~1 m/s and blew up the integration), the part is pushed at most at a
+    finger's speed, and the squeeze then holds it."""
+    rt, finger, moved = _grasp_off_centre(offset)
+    assert finger < 0.75 * GRASP_SPEED  # per finger: half the jaw's speed, with the PD's overshoot
+    assert moved < 0.75 * GRASP_SPEED
+    assert rt.gripper.blocked
+    assert rt.gripper.width(rt.scene.data) == pytest.approx(rt.scene.diameters.bodies[0], abs=1e-5)
+
+
+def test_a_part_pushed_against_its_pockets_wall_is_still_grasped():
+    """0.6 mm off, beyond the pocket's play: the first pad tilts the part against the pocket's
+    wall, the jaw reads blocked, the part gives way under the rising squeeze and the jaw closes
+    on it again. The integration survives and the part ends held; the finger does reach
+    ~0.6 m/s for a millisecond before the servo sees the jaw move again (the 1 kHz servo on a
+    ~20 g finger: measured, not asserted)."""
+    rt, _, _ = _grasp_off_centre(6e-4)
+    assert rt.gripper.blocked
+    assert rt.gripper.width(rt.scene.data) == pytest.approx(rt.scene.diameters.bodies[0], abs=1e-5)
