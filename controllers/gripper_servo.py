@@ -5,8 +5,8 @@ A grasp closes the jaw at a bounded speed and squeezes once the jaw is blocked, 
 grasp does. Squeezing from the open hand at once (the force alone driving the fingers) threw
 them at the part at up to 0.9 m/s per finger: a part off-centre between the pads was struck by
 one pad, knocked across its tray pocket at ~1 m/s and tumbled into the pocket's wall at
-~500 rad/s, and the integration blew up (cell 26 of docs/sim2real.md; the serial-arm ablation
-on MuJoCo 4.0.1). A real hand never closes that fast.
+~500 rad/s, and the episode filed a blown-up grasp (cell 26 of docs/sim2real.md; the serial-arm
+ablation on MuJoCo 4.0.1). A real hand never closes that fast.
 """
 
 from __future__ import annotations
@@ -25,8 +25,10 @@ GRASP_SPEED = 0.04
 whose maximum is 0.1 m/s (frankx ``Gripper::max_speed``; libfranka's ``grasp`` takes it as an
 argument). Closing the cell's 1.5 mm margin takes ~40 ms."""
 SQUEEZE_RISE = 0.02
-"""Time the squeeze takes to rise to its full force once the jaw is blocked [s]: a step
-accelerates a finger that was not blocked after all at ~1000 m/s^2."""
+"""Time the squeeze takes to rise to its full force once the jaw is blocked [s]. A step
+accelerates the ~20 g finger at ~1000 m/s^2 where the jaw was blocked by a part pushed against
+its pocket's wall rather than by both pads (0.29 m/s within a millisecond, and the part blew
+up); over 20 ms the part straightens between the pads first."""
 BLOCKED_LAG = 3e-4
 """Jaw width above its closing reference that means the pads are blocked by the part [m]:
 above the lag of the free fingers' tracking (kd * speed / kp = 0.2 mm at GRASP_SPEED)."""
@@ -35,8 +37,7 @@ above the lag of the free fingers' tracking (kd * speed / kp = 0.2 mm at GRASP_S
 @dataclass
 class GripperServo:
     """A PD on the jaw width (``open_to``, and a grasp while the jaw closes on its speed-limited
-    reference), then a squeeze per pad [N] rising over SQUEEZE_RISE once the jaw is blocked;
-    a blocked jaw that moves faster than a grasp closes on its reference again."""
+    reference), then a squeeze per pad [N] rising over SQUEEZE_RISE once the jaw is blocked."""
 
     actuator: int
     finger_qpos: np.ndarray
@@ -57,7 +58,6 @@ class GripperServo:
     force: float = 0.0
     """The squeeze commanded now [N per pad]: it rises to ``squeeze`` over SQUEEZE_RISE once
     the jaw is blocked."""
-    last_width: float = 0.0
 
     @classmethod
     def from_model(cls, model: mujoco.MjModel, period: float) -> GripperServo:
@@ -82,11 +82,11 @@ class GripperServo:
     def command(self) -> tuple:
         """What the servo is doing (for a snapshot): restore it with :meth:`resume`."""
         return (self.width_target, self.squeeze, self.closing_speed, self.reference, self.blocked,
-                self.force, self.last_width)
+                self.force)
 
     def resume(self, command: tuple) -> None:
         (self.width_target, self.squeeze, self.closing_speed, self.reference, self.blocked,
-         self.force, self.last_width) = command
+         self.force) = command
 
     def width(self, data: mujoco.MjData) -> float:
         return float(data.qpos[self.finger_qpos].sum())
@@ -104,12 +104,7 @@ class GripperServo:
 
     def _grasp(self, width: float, data: mujoco.MjData) -> float:
         if self.reference is None:
-            self.reference = self.last_width = width
-        # a blocked jaw that closes faster than a grasp would: the part gave way (it had been
-        # pushed against its pocket's wall, not held): close on it again at the grasp's speed
-        if self.blocked and self.last_width - width > self.closing_speed * self.period:
-            self.blocked, self.reference = False, width
-        self.last_width = width
+            self.reference = width
         if not self.blocked:
             self.reference = max(0.0, self.reference - self.closing_speed * self.period)
             pd = self._pd(data, self.reference)

@@ -218,7 +218,7 @@ class _Runner:
             s.t[active] += dt
             score(batch, s, active, force, self.ids)
             stall(ctl, s, active, ins)
-            health(batch, s, active, qvel)
+            health(batch, s, active, qvel, model.dof_length)
             if probe is not None:
                 probe(batch, s)
             if on_period is not None:

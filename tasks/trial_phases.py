@@ -173,11 +173,13 @@ def stall(ctl: BatchArmController, s: TrialSlots, active: NDArray[np.intp], ins:
     s.phase[out], s.timed_out[out] = DONE, True
 
 
-def health(batch: mujoco.batch.Batch, s: TrialSlots, active: NDArray[np.intp], qvel: Arr) -> None:
+def health(batch: mujoco.batch.Batch, s: TrialSlots, active: NDArray[np.intp], qvel: Arr,
+           dof_length: Arr) -> None:
     """A trial the simulator could not finish ends as a fault (named), the others go on: a
-    MuJoCo warning, a non-finite state or a body faster than MAX_SPEED (cell_runtime.py)."""
+    MuJoCo warning, a non-finite state or a point faster than MAX_SPEED (cell_runtime.py: each
+    dof's speed times its ``dof_length``)."""
     warned = batch.warning[active, :, 0].sum(axis=1) > 0  # (nsim, mjNWARNING, [number, info])
-    v = qvel[active]
+    v = qvel[active] * dof_length
     bad = warned | ~np.isfinite(v).all(axis=1) | (np.abs(np.nan_to_num(v, nan=np.inf)).max(axis=1) > MAX_SPEED)
     for k in np.flatnonzero(bad):  # rare: the per-trial loop runs only over the broken ones
         s.fault.setdefault(int(active[k]), ("MuJoCo warning" if warned[k] else "state blew up or went "
