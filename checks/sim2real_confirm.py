@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from serpar.checks.background_rerun import Job, reruns_side_by_side
 from serpar.checks.sim2real import (
     OutcomeDiff,
     RealEpisode,
@@ -146,8 +147,11 @@ def confirm_holes(real: list[HoleOutcome], updated: list[HoleOutcome], judged: S
 
 def confirm(longest: RealEpisode, effects: list[str], model: dict[str, object],
             prior: DiagnosisModel, updated_folder: Path, before: dict[str, OutcomeDiff],
-            judged: Sequence[str], out: Path, tick: Tick) -> list[Confirmation]:
-    """Each of ``effects`` judged on :func:`confirm_holes` of ``longest`` rerun without it."""
+            judged: Sequence[str], out: Path, tick: Tick, beside: Tick | None = None,
+            workers: int = 0) -> list[Confirmation]:
+    """Each of ``effects`` judged on :func:`confirm_holes` of ``longest`` rerun without it (the
+    reruns on ``workers`` processes, 0: one per core; their lines to ``beside``, default
+    ``tick``)."""
     real_all = outcomes_of([longest.folder])
     updated = outcomes_of([updated_folder])
     picked = confirm_holes(real_all, updated, judged)
@@ -155,24 +159,25 @@ def confirm(longest: RealEpisode, effects: list[str], model: dict[str, object],
     sample = dataclasses.replace(longest, config=dataclasses.replace(longest.config, holes=holes))
     real = _renumbered([real_all[k] for k in picked])
     out.mkdir(parents=True, exist_ok=True)
-    if picked == list(range(len(picked))):  # the recording's first holes: as the update ran them
-        with_it = updated[:len(picked)]
-    else:
+    jobs: list[Job] = []
+    first = picked == list(range(len(picked)))  # the recording's first holes: as the update ran them
+    if not first:
         path = out / "with_all.model.json"
         path.write_text(json.dumps(model, indent=2))
         tick(f"confirming: holes {', '.join(map(str, holes))} with the whole update")
-        with_it = outcomes_of(rerun([sample], out / "with_all", str(path),
-                                    updated_contact_friction(model), tick))
-    found = []
+        jobs.append(([sample], out / "with_all", str(path), updated_contact_friction(model)))
     for name in effects:
         reduced = without_effect(model, name, prior)
         path = out / f"without_{name}.model.json"
         path.write_text(json.dumps(reduced, indent=2))
         tick(f"confirming {name}: {len(holes)} hole(s) without it")
-        folders = rerun([sample], out / f"without_{name}", str(path),
-                        updated_contact_friction(reduced), tick)
-        found.append(dataclasses.replace(
-            judge(name, real, with_it, outcomes_of(folders), before, judged), holes=holes))
+        jobs.append(([sample], out / f"without_{name}", str(path),
+                      updated_contact_friction(reduced)))
+    # independent reruns of a few holes each: side by side, one per core
+    runs = [outcomes_of(f) for f in reruns_side_by_side(jobs, beside or tick, workers)]
+    with_it = updated[:len(picked)] if first else runs.pop(0)
+    found = [dataclasses.replace(judge(name, real, with_it, without, before, judged), holes=holes)
+             for name, without in zip(effects, runs)]
     return found
 
 
@@ -192,17 +197,19 @@ def away_from_cell(before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff]
 def confirmed_update(episodes: list[RealEpisode], real: list[HoleOutcome],
                      before: dict[str, OutcomeDiff], after: dict[str, OutcomeDiff],
                      updated_folders: list[Path], model: dict[str, object], prior: DiagnosisModel,
-                     effects: list[str], out: Path, tick: Tick
+                     effects: list[str], out: Path, tick: Tick, beside: Tick | None = None,
+                     workers: int = 0
                      ) -> tuple[dict[str, object], dict[str, OutcomeDiff], list[Confirmation]]:
     """Where the updated rerun left an outcome further from the cell, each of ``effects``
-    judged by :func:`confirm`; the unconfirmed dropped and every hole rerun once more without
-    them. Returns the model, the outcomes' differences after, and the judgements."""
+    judged by :func:`confirm` (``beside``, ``workers``: its reruns'); the unconfirmed dropped
+    and every hole rerun once more without them. Returns the model, the outcomes' differences
+    after, and the judgements."""
     away = away_from_cell(before, after)
     if not effects or not away:
         return model, after, []
     longest = max(episodes, key=lambda e: len(e.config.holes))  # type: ignore[arg-type]
     found = confirm(longest, effects, model, prior, updated_folders[episodes.index(longest)],
-                    before, away, out / "confirm", tick)
+                    before, away, out / "confirm", tick, beside, workers)
     dropped = [c.effect for c in found if not c.confirmed]
     if not dropped:
         return model, after, found

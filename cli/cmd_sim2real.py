@@ -7,6 +7,7 @@ import argparse
 import dataclasses
 from pathlib import Path
 
+from serpar.checks.background_rerun import BackgroundRerun
 from serpar.checks.sim2real import (
     OutcomeDiff,
     beyond_ci,
@@ -16,11 +17,10 @@ from serpar.checks.sim2real import (
     established,
     outcomes_of,
     real_episodes,
-    rerun,
     updated_contact_friction,
-    updated_rerun,
     write_updated,
 )
+from serpar.checks.sim2real_bore import updated_rerun
 from serpar.checks.sim2real_confirm import confirmed_update, to_confirm
 from serpar.checks.sim2real_report import write_sim2real_report
 from serpar.cli import arg_types
@@ -107,23 +107,32 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
     folder = out_folder(out, "--out", args.force, ("updated.model.json", "updated.xml"))
     folder.clear()
     out.mkdir(parents=True, exist_ok=True)
+    running: list[BackgroundRerun] = []
     with StageLines("sim2real") as step:  # one line per stage on stderr, always (--json too)
         try:
             notes = [n for e in episodes for n in e.notes]
             real_outcomes = outcomes_of([e.folder for e in episodes])
             n = len(real_outcomes)
             step(f"{n} hole{'s' * (n != 1)} in {len(episodes)} recording(s); the nominal "
-                 "simulator on the same holes")
-            nominal_outcomes = outcomes_of(rerun(episodes, out / "nominal", start_model, None, step))
-            before = compare(real_outcomes, nominal_outcomes)
-            step("diagnosing the real recordings against it")
+                 "simulator on the same holes, beside the diagnosis")
+            # a rerun holds one core: the diagnosis, independent of it, takes the others
+            nominal_run = BackgroundRerun(episodes, out / "nominal", start_model, None,
+                                          step.beside)
+            running.append(nominal_run)
+            step("diagnosing the real recordings against the nominal simulator")
             nominal = dataclasses.replace(episodes[0].config, plant_model=start_model)
             diag, model, more = diagnose_cell(episodes, nominal, start_model or "the nominal cell",
                                               args.seed, step, args.workers)
             notes += more
+            if not nominal_run.finished():
+                step("diagnosed; waiting for the nominal rerun")
+            nominal_outcomes = outcomes_of(nominal_run.result())
+            running.clear()
+            before = compare(real_outcomes, nominal_outcomes)
             step(f"established: {', '.join(f.effect for f in diag.established) or 'nothing'}; the "
                  "updated simulator on the same holes")
-            model, bore, updated, bore_note = updated_rerun(episodes, real_outcomes, model, out, step)
+            model, bore, updated, bore_note = updated_rerun(episodes, real_outcomes, model, out,
+                                                            step, nominal_outcomes, step.beside)
             notes += [bore_note] if bore_note else []
             model_path, exported = write_updated(model, out)
             contact = updated_contact_friction(model)
@@ -133,12 +142,15 @@ def cmd_sim2real(args: argparse.Namespace) -> int:
                                  model["effects"])  # type: ignore[arg-type]
             model, after, checked = confirmed_update(
                 episodes, real_outcomes, before, after, updated, model,
-                model_from_config(nominal, start_model or "the nominal cell"), carried, out, step)
+                model_from_config(nominal, start_model or "the nominal cell"), carried, out, step,
+                step.beside, args.workers)
             dropped = [c.effect for c in checked if c.dropped]
             if dropped:
                 model_path, exported = write_updated(model, out)
                 contact = updated_contact_friction(model)
         except KeyboardInterrupt:  # Ctrl-C: the finished reruns stay in OUT; no verdict
+            for run in running:
+                run.stop()
             return step.interrupted(args.json, real_dir=str(real), out=str(out))
     words = (verdict(before, after, [e for e in carried if e not in dropped])
              + carried_words(diag, model)

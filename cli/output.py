@@ -107,6 +107,12 @@ class StageLines:
         self.current = text
         self._write(text)
 
+    def beside(self, text: str) -> None:
+        """A line of work running beside the current stage (a rerun in its own process): it
+        counts as finished, and the stage the run is in stays the current one."""
+        self.finished.append(text)
+        self._write(text)
+
     def _heartbeat(self) -> None:
         while not self._stop.wait(1.0):
             if time.perf_counter() - self.last >= self.every_s:

@@ -16,7 +16,7 @@ mu is found when the reruns show mu moves the force on these holes (the mean of
 sim(mu1) - sim(mu0) beyond chance at 3 sigma's level, by Student's t) and mu lies in the
 range the cell can take and lies beyond 2 sigma of mu0 (within it the simulator's mu stands:
 "agrees"); otherwise it is named not identifiable, with the reason. The reruns must carry the
-arm as diagnosed (checks/sim2real.py ``updated_rerun``): the push also holds the arm's own physics.
+arm as diagnosed (checks/sim2real_bore.py ``updated_rerun``): the push also holds the arm's own physics.
 """
 
 from __future__ import annotations

@@ -1,12 +1,15 @@
 """The bore's friction from the insertions' in-bore push, read through the simulator's reruns at
-two mu (diagnosis/bore_friction.py, checks/sim2real.py): synthetic holes whose truth is known."""
+two mu (diagnosis/bore_friction.py, checks/sim2real_bore.py): synthetic holes whose truth is known."""
 
 from __future__ import annotations
+
+import shutil
 
 import numpy as np
 import pytest
 
-from serpar.checks.sim2real import NOMINAL_MU, bore_rerun_mu, with_bore_friction
+from serpar.checks.sim2real import NOMINAL_MU
+from serpar.checks.sim2real_bore import bore_rerun_mu, with_bore_friction
 from serpar.diagnosis.bore_friction import bore_friction
 from serpar.diagnosis.task_outcomes import OUTCOMES, HoleOutcome
 
@@ -97,10 +100,10 @@ def test_a_push_the_arm_explains_is_not_read_as_the_bores_friction() -> None:
 
 
 def _fake_simulator(monkeypatch: pytest.MonkeyPatch, hand: float) -> list:
-    """checks/sim2real.py's reruns replaced by synthetic holes: a rerun on the diagnosed arm
+    """checks/sim2real_bore.py's reruns replaced by synthetic holes: a rerun on the diagnosed arm
     (a model file) carries the hand's push, a rerun's mu is its contact friction; returns the
     (folder, mu) of every rerun asked for."""
-    from serpar.checks import sim2real
+    from serpar.checks import sim2real_bore
 
     calls: list[tuple[str, float | None]] = []
 
@@ -112,19 +115,37 @@ def _fake_simulator(monkeypatch: pytest.MonkeyPatch, hand: float) -> list:
         (out / "push.npy").write_bytes(push.tobytes())
         return [out]
 
-    monkeypatch.setattr(sim2real, "rerun", rerun)
-    monkeypatch.setattr(sim2real, "outcomes_of", lambda folders: _holes(
+    class Ahead:  # the rerun started beside the updated one, run here at once
+        def __init__(self, episodes, out, plant_model, contact_friction, tick):
+            self.out, self.folders = out, rerun(episodes, out, plant_model, contact_friction, tick)
+
+        def result(self):
+            return self.folders
+
+        def cancel(self):
+            calls.append(("cancelled", None))
+            shutil.rmtree(self.out)
+
+        def stop(self):
+            pass
+
+    monkeypatch.setattr(sim2real_bore, "rerun", rerun)
+    monkeypatch.setattr(sim2real_bore, "BackgroundRerun", Ahead)
+    monkeypatch.setattr(sim2real_bore, "outcomes_of", lambda folders: _holes(
         np.frombuffer((folders[0] / "push.npy").read_bytes())))
     return calls
 
 
-def _updated_rerun(real_mu: float, hand: float, monkeypatch, out):
-    from serpar.checks.sim2real import updated_rerun
+def _updated_rerun(real_mu: float, hand: float, monkeypatch, out, nominal_mu: float | None = None):
+    """``nominal_mu``: the nominal rerun's holes at that mu, no hand (what the rerun started
+    beside the updated one guesses from); None: no nominal rerun given."""
+    from serpar.checks.sim2real_bore import updated_rerun
 
     calls = _fake_simulator(monkeypatch, hand)
     real = _holes(_cell(real_mu, seed=1, noise=0.02) + hand)
     model = {"effects": ["payload"], "params": {"payload": {}}}
-    return calls, *updated_rerun([], real, model, out, lambda line: None)
+    nominal = None if nominal_mu is None else _holes(_cell(nominal_mu, seed=9, noise=0.02))
+    return calls, *updated_rerun([], real, model, out, lambda line: None, nominal)
 
 
 def test_a_push_the_updated_rerun_explains_spends_no_second_rerun(monkeypatch, tmp_path) -> None:
@@ -144,3 +165,39 @@ def test_a_rougher_bore_gets_its_mu_and_the_holes_once_more(monkeypatch, tmp_pat
     assert calls[2][1] == pytest.approx(bore.mu) and "contact_friction" in model["effects"]
     assert (tmp_path / "bore_mu0" / "push.npy").is_file() and folders == [tmp_path / "updated"]
     assert "in the updated model" in note
+
+
+def test_the_second_mus_rerun_runs_beside_the_updated_one_where_the_nominal_points_right(
+        monkeypatch, tmp_path) -> None:
+    """A rougher bore: the nominal rerun's push is short of the cell's as the diagnosed arm's
+    is, so the rerun at mu + 0.25 starts before the updated one and is the one used; no rerun
+    more than without it."""
+    calls, model, bore, folders, note = _updated_rerun(0.445, 0.08, monkeypatch, tmp_path,
+                                                       nominal_mu=NOMINAL_MU)
+    assert [c[0] for c in calls] == ["bore_mu", "updated", "updated"]
+    assert calls[0][1] == pytest.approx(NOMINAL_MU + 0.25)
+    assert bore.mu is not None and abs(bore.mu - 0.445) < 2 * bore.std
+    assert (tmp_path / "bore_mu" / "push.npy").is_file()
+
+
+def test_a_second_mus_rerun_not_asked_for_is_cancelled_and_leaves_nothing(monkeypatch,
+                                                                          tmp_path) -> None:
+    """The nominal arm, without the hand, pushes less than the cell: the rerun beside the
+    updated one takes mu + 0.25; the hand the update carries explains the push, so it is
+    cancelled and its folder removed."""
+    calls, model, bore, folders, note = _updated_rerun(NOMINAL_MU, 0.08, monkeypatch, tmp_path,
+                                                       nominal_mu=NOMINAL_MU)
+    assert [c[0] for c in calls] == ["bore_mu", "updated", "cancelled"] and bore.agrees
+    assert not (tmp_path / "bore_mu").exists() and folders == [tmp_path / "updated"]
+
+
+def test_a_second_mus_rerun_guessed_the_wrong_way_is_replaced(monkeypatch, tmp_path) -> None:
+    """The nominal rerun pushed harder than the cell (mu 0.6 there): the guess is mu - 0.1, but
+    the diagnosed arm pushes less than the cell at mu 0.445: that rerun is cancelled and the
+    holes run at mu + 0.25."""
+    calls, model, bore, folders, note = _updated_rerun(0.445, 0.08, monkeypatch, tmp_path,
+                                                       nominal_mu=0.6)
+    assert [c[0] for c in calls] == ["bore_mu", "updated", "cancelled", "bore_mu", "updated"]
+    assert calls[0][1] == pytest.approx(NOMINAL_MU - 0.1)
+    assert calls[3][1] == pytest.approx(NOMINAL_MU + 0.25)
+    assert bore.mu is not None and abs(bore.mu - 0.445) < 2 * bore.std

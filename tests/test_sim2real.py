@@ -7,6 +7,7 @@ import contextlib
 import io
 import json
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -171,23 +172,55 @@ def test_the_concealed_latency_is_found_within_2_sigma(latency_cell) -> None:
 def test_sim2real_stopped_by_ctrl_c_keeps_its_finished_reruns(latency_cell, tmp_path, capsys,
                                                               monkeypatch) -> None:
     """Progress on stderr with --json too (a line per rerun hole, with the elapsed time); Ctrl-C
-    during the diagnosis: exit 130, the nominal rerun kept in OUT, the summary object lists
-    the finished stages and where it stopped, and holds no verdict."""
+    during the diagnosis, once the nominal rerun beside it (its own process) has recorded a
+    hole: exit 130, the nominal rerun kept in OUT with that hole, the summary object lists the
+    finished stages (the rerun's hole among them) and the one it stopped in (the diagnosis),
+    and holds no verdict."""
     import serpar.cli.cmd_sim2real as cmd
 
+    cell, out = latency_cell[0], tmp_path / "s2r"
+    meta = out / "nominal" / "episode_5" / "meta.json"
+
     def stopped(*args, **kwargs):
+        deadline = time.monotonic() + 600.0
+        while time.monotonic() < deadline and not (
+                meta.is_file() and json.loads(meta.read_text()).get("holes")):
+            time.sleep(0.2)
         raise KeyboardInterrupt
     monkeypatch.setattr(cmd, "diagnose_cell", stopped)
-    cell, out = latency_cell[0], tmp_path / "s2r"
     capsys.readouterr()
     assert main(["sim2real", str(cell), "--out", str(out), "--json"]) == 130
     captured = capsys.readouterr()
     result = json.loads(captured.out)
     assert result["interrupted"] is True and "verdict" not in result
-    assert result["interrupted_at"] == "diagnosing the real recordings against it"
+    assert result["interrupted_at"] == "diagnosing the real recordings against the nominal simulator"
     assert any(s.startswith("nominal rerun 1 of 1: hole") for s in result["finished"])
     lines = captured.err.splitlines()
     assert all(line.startswith("sim2real [") for line in lines), captured.err
     assert any("nominal rerun 1 of 1: hole" in line for line in lines)
-    assert lines[-1].endswith("interrupted in: diagnosing the real recordings against it")
-    assert (out / "nominal").is_dir() and not (out / "updated").exists()
+    assert lines[-1].endswith("interrupted in: diagnosing the real recordings against the nominal "
+                              "simulator")
+    assert json.loads(meta.read_text())["holes"] and not (out / "updated").exists()
+
+
+@pytest.mark.slow
+def test_reruns_side_by_side_are_the_reruns_one_after_another(latency_cell, tmp_path) -> None:
+    """Two reruns of the cell's hole in their own processes at once (the nominal, and at another
+    bore friction): each in its folder, the nominal one's outcomes exactly those of sim2real's
+    own nominal rerun (the simulator is deterministic, whichever process runs it), the other's
+    its own."""
+    from serpar.checks.background_rerun import reruns_side_by_side
+    from serpar.checks.sim2real import outcomes_of
+
+    cell, s2r = latency_cell[0], latency_cell[1]
+    episodes = real_episodes(cell)
+    lines: list[str] = []
+    nominal, rough = reruns_side_by_side([(episodes, tmp_path / "a", None, None),
+                                          (episodes, tmp_path / "b", None, 0.45)], lines.append)
+    assert nominal == [tmp_path / "a" / "episode_5"] and rough == [tmp_path / "b" / "episode_5"]
+    (ours,), (theirs,) = outcomes_of(nominal), outcomes_of([s2r / "nominal" / "episode_5"])
+    assert ours.values == theirs.values and ours.bore_axial == theirs.bore_axial
+    (other,) = outcomes_of(rough)
+    assert other.bore_axial != ours.bore_axial
+    assert any(line.startswith("a rerun 1 of 1: hole 0") for line in lines), lines
+    assert any(line.startswith("b rerun 1 of 1: hole 0") for line in lines), lines
