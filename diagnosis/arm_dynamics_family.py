@@ -10,7 +10,7 @@ windows tile the time axis, so no held-out sample enters a training row.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 
 import numpy as np
 import scipy.sparse as sp
@@ -129,9 +129,11 @@ class ArmDynamicsFamily:
         parts = {"link": link / sigma_link, "drive": drive / sigma_drive}
         return np.hstack([parts[b] for b in self._blocks]).ravel()
 
-    def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
-        """d residual / d params (diagnosis/arm_dynamics_jacobian.py)."""
-        return residual_jacobian(self, params, rows)
+    def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64],
+                 skip: Collection[str] = ()) -> Vec:
+        """d residual / d params, the blocks in ``skip`` left out
+        (diagnosis/arm_dynamics_jacobian.py)."""
+        return residual_jacobian(self, params, rows, skip)
 
     def baseline_columns(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
                          ) -> sp.csr_matrix:

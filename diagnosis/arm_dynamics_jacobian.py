@@ -12,7 +12,7 @@ them exact, a 12-hole episode's Jacobian costs ~30 residual evaluations instead 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from typing import Protocol
 
 import numpy as np
@@ -186,14 +186,17 @@ def _exact(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64
     return cols.reshape(cols.shape[0], -1).T
 
 
-def residual_jacobian(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64]
-                      ) -> Vec:
-    """Columns in the mapping's block order (each block's parameters in its order)."""
+def residual_jacobian(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64],
+                      skip: Collection[str] = ()) -> Vec:
+    """Columns in the mapping's block order (each block's parameters in its order), the blocks
+    in ``skip`` left out (a fit by variable projection has its tare's columns apart, sparse)."""
     rows = np.asarray(rows, np.int64)
     base = family.residual(params, rows)
     misfit = family.misfits(params, rows)
     cols = []
     for name, values in params.items():
+        if name in skip:
+            continue
         values = np.asarray(values, float)
         if family.baseline is not None and name == family.baseline.name:
             cols.append(tare_columns(family, params, rows).toarray())

@@ -16,7 +16,7 @@ compliance is never a candidate.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 
 import numpy as np
 from numpy.typing import NDArray
@@ -122,8 +122,8 @@ class StaticArmFamily:
         values, _, link, _ = self._state(params, np.asarray(rows, np.int64))
         return forward_rows(self.chain, values, link)
 
-    def jacobian(self, params: Mapping[str, NDArray[np.float64]], rows: NDArray[np.int64]
-                 ) -> NDArray[np.float64]:
+    def jacobian(self, params: Mapping[str, NDArray[np.float64]], rows: NDArray[np.int64],
+                 skip: Collection[str] = ()) -> NDArray[np.float64]:
         """Exact d residual / d parameters, columns in the order of ``params`` (the engine's
         optional fast path; the screw form of serpar.kinematics.mdh: u x (p - o) or u per element)."""
         rows = np.asarray(rows, np.int64)
@@ -133,7 +133,9 @@ class StaticArmFamily:
         scaled = np.ones_like(values)
         scaled[:, self.lengths] = factor[:, None]
         cols = []
-        for name in params:
+        for name in params:  # the blocks in ``skip`` left out
+            if name in skip:
+                continue
             if name == "baseline":
                 cols.append(g[:, :, self.base_idx] * scaled[:, None, self.base_idx])
             elif name == "geometric":

@@ -5,7 +5,7 @@ the tares move back, and no drift is needed to make up the difference)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 
 import numpy as np
 import scipy.sparse as sp
@@ -86,14 +86,24 @@ class WithTerm:
         return self.inner.residual(self._inner(params), rows) - (
             design(self._groups, self._chosen, rows, self._channels) @ params[EMPIRICAL])
 
-    def _jacobian(self, params: Mapping[str, Vec], rows: Rows) -> Vec:
-        inner = self.inner.jacobian(self._inner(params), rows)  # type: ignore[attr-defined]
+    def _jacobian(self, params: Mapping[str, Vec], rows: Rows, skip: Collection[str] = ()) -> Vec:
+        """Columns in block order, the blocks in ``skip`` left out."""
+        jacobian = self.inner.jacobian  # type: ignore[attr-defined]
+        inner = (jacobian(self._inner(params), rows, skip) if skip  # a family's own may lack it
+                 else jacobian(self._inner(params), rows))
         if EMPIRICAL not in params:
             return inner
-        jac = np.hstack([inner, -design(self._groups, self._chosen, rows, self._channels)])
+        own = EMPIRICAL not in skip
+        jac = (np.hstack([inner, -design(self._groups, self._chosen, rows, self._channels)])
+               if own else inner)
         band, slope = self._band(params[EMPIRICAL], rows)
         if band is None:
             return jac
+        r = self._before_band(params, rows)
+        if own:
+            jac[:, inner.shape[1]:] -= np.sign(r)[:, None] * slope
+        jac[np.abs(r) <= band] = 0.0  # inside the band nothing moves the residual
+        return jac
         r = self._before_band(params, rows)
         jac[:, inner.shape[1]:] -= np.sign(r)[:, None] * slope
         jac[np.abs(r) <= band] = 0.0  # inside the band nothing moves the residual

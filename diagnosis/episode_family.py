@@ -23,7 +23,7 @@ insertions for the chamfer rows.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 
 import numpy as np
 import scipy.sparse as sp
@@ -132,13 +132,15 @@ class EpisodeFamily:
             return out
         return np.concatenate([out, self.slides.residual(params.get(FRICTION.name), slide)])
 
-    def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
+    def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64],
+                 skip: Collection[str] = ()) -> Vec:
         """The arm rows' Jacobian (the inner family's), then the chamfer slides', which only
-        the contact friction moves (by differences, as the fit's own would take them)."""
+        the contact friction moves (by differences, as the fit's own would take them); the
+        blocks in ``skip`` left out."""
         arm, slide = self._parts(rows)
         inner = {k: v for k, v in params.items() if k != FRICTION.name}
-        j_arm = self.inner.jacobian(inner, self.keep[arm])
-        sizes = {k: np.asarray(v).size for k, v in params.items()}
+        j_arm = self.inner.jacobian(inner, self.keep[arm], skip)
+        sizes = {k: np.asarray(v).size for k, v in params.items() if k not in skip}
         n_slide = slide.size if self.slides is not None else 0
         out = np.zeros((j_arm.shape[0] + n_slide, sum(sizes.values())))
         col, inner_col = 0, 0

@@ -188,6 +188,12 @@ class Family(Protocol):
         """The "where" table of the given rows' whitened residual."""
         ...
 
+    # Optional (diagnosis/fit.py looks for them): ``jacobian(params, rows)``, the residual's
+    # derivative by every parameter, columns in the mapping's block order, else 2-point
+    # differences; with ``baseline_columns(params, rows)`` (the baseline's, sparse) the fit
+    # solves the baseline out (diagnosis/separable.py) and calls ``jacobian(params, rows,
+    # skip=(baseline,))``, the columns of the blocks in ``skip`` left out.
+
 
 def export_model_files(family: object, model: Mapping[str, object], stem: Path) -> list[Path]:
     """The family's own model files for the final fit (``model``: ``Diagnosis.model``), or

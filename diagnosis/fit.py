@@ -239,8 +239,9 @@ def _fit_separable(family: Family, active: tuple[str, ...], blocks: tuple[Effect
     def jac(xo: NDArray[np.float64]) -> NDArray[np.float64]:
         solve(xo)
         params = unpack(blocks, full(xo))
-        j = family.jacobian(params, train)[:, free]  # type: ignore[attr-defined]
-        return projected(j, nb, family.baseline_columns(params, train))  # type: ignore[attr-defined]
+        # the effects' columns alone: the baseline's come sparse from baseline_columns
+        j = family.jacobian(params, train, skip=(base.name,))[:, outer[nb:]]  # type: ignore[attr-defined]
+        return projected(j, 0, family.baseline_columns(params, train))  # type: ignore[attr-defined]
 
     nfev = 1
     if outer.any():

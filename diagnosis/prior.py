@@ -11,7 +11,7 @@ updated by any correction, plus the new ones), so it can be the next run's plant
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import replace
 
 import numpy as np
@@ -107,11 +107,16 @@ class PriorFamily:
     def residual(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
         return self.inner.residual(self._merged(params), rows)
 
-    def _jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
+    def _jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64],
+                  skip: Collection[str] = ()) -> Vec:
         # columns in block order: the fitted blocks come first in the merged mapping, and a
-        # correction's derivative is its full value's (value = prior + correction)
-        k = sum(len(v) for v in params.values())
-        return self.inner.jacobian(self._merged(params), rows)[:, :k]  # type: ignore[attr-defined]
+        # correction's derivative is its full value's (value = prior + correction); the
+        # prior's blocks not fitted now are left out, not computed and cut off
+        held = {k for k in self.fixed if k not in params}
+        jacobian = self.inner.jacobian  # type: ignore[attr-defined]
+        if not (skip or held):  # a family's own Jacobian may not take skip
+            return jacobian(self._merged(params), rows)
+        return jacobian(self._merged(params), rows, {*skip, *held})
 
     def _baseline_columns(self, params: Mapping[str, Vec], rows: NDArray[np.int64]
                           ) -> sp.csr_matrix:

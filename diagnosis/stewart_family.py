@@ -15,7 +15,7 @@ extrapolation in time, and, when a campaign widens its poses as it goes, in spac
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -152,7 +152,8 @@ class StewartFamily:
                        so3_log_batch(h.rot[rows] @ np.swapaxes(rot, -1, -2))])
         return (r / self.sigma[rows]).ravel()
 
-    def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
+    def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64],
+                 skip: Collection[str] = ()) -> Vec:
         """Exact d residual / d parameters (columns in the order of ``params``): the pose
         moves by J^-1 (dL - d|leg|), J the leg Jacobian at the predicted pose."""
         rows = np.asarray(rows, np.int64)
@@ -161,7 +162,9 @@ class StewartFamily:
         jinv = np.linalg.inv(jac)  # (n, 6 pose, 6 legs)
         n = len(rows)
         cols = []
-        for name in params:
+        for name in params:  # the blocks in ``skip`` left out
+            if name in skip:
+                continue
             if name == GEOMETRY:
                 dleg = np.zeros((n, 6, len(self._geo_idx)))  # d(L - |leg|) per leg
                 ur = np.einsum("nij,njk->nik", u, rot)  # u_i^T R (platform-frame dP)

@@ -21,7 +21,7 @@ contiguous segment the fit never saw).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 
 import numpy as np
 from numpy.typing import NDArray
@@ -156,7 +156,8 @@ class StewartMotionFamily:
                        s.legs[rows] - legs])
         return (r / self.sigma[rows]).ravel()
 
-    def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64]) -> Vec:
+    def jacobian(self, params: Mapping[str, Vec], rows: NDArray[np.int64],
+                 skip: Collection[str] = ()) -> Vec:
         """Exact d residual / d parameters (columns in the order of ``params``): the pose
         moves by J^-1 dL, J the leg Jacobian at the predicted pose (as stewart.py); the
         tracking residual moves by the nominal legs' rate times d tau."""
@@ -166,7 +167,9 @@ class StewartMotionFamily:
         jinv = np.linalg.inv(jac)
         n = len(rows)
         cols = []
-        for name in params:
+        for name in params:  # the blocks in ``skip`` left out
+            if name in skip:
+                continue
             track = None
             if name == GEOMETRY:
                 dleg = np.zeros((n, 6, len(self._geo_idx)))
