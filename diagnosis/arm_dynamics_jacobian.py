@@ -1,8 +1,11 @@
 """The arm-dynamics residual's Jacobian for the fit (diagnosis/fit.py takes a family's own).
 
 Exact columns for the effects linear in their parameters (friction, rotor inertia, a coupled
-motor, a torque gain: :func:`linear_columns`) and for the sigmoid friction's, forward differences as scipy's
-``"2-point"`` takes them (step sqrt(eps) max(1, |x|), signed like x) for every other effect's,
+motor, a torque gain: :func:`linear_columns`), for the sigmoid friction's, the Stribeck fall's
+and the payload's (:func:`payload_columns`: held from the first step on in a cell with a hand's
+load, its 10 columns by differences cost ten residual evaluations per iteration of every later
+fit), forward differences as scipy's ``"2-point"`` takes them (step sqrt(eps) max(1, |x|),
+signed like x) for every other effect's,
 and exact columns for the torque tares: a tare enters
 the link channel linearly, so its column is minus its interpolation weight at the row, through
 the stiction band, over the row's sigma. An episode's drifting tare has seven parameters per
@@ -20,6 +23,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from serpar.diagnosis.arm_dynamics_effects import INERTIAL, SIGMOID, TILT, EffectModels
+from serpar.diagnosis.arm_dynamics_payload import standard_jacobian
 from serpar.diagnosis.arm_dynamics_terms import Terms
 from serpar.diagnosis.family import Effect
 from serpar.diagnosis.memo import Memo
@@ -186,6 +190,36 @@ def _exact(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64
     return cols.reshape(cols.shape[0], -1).T
 
 
+def payload_columns(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64],
+                    misfit: tuple[Vec, ...]) -> Vec:
+    """The residual's exact derivative by the payload's 10 parameters: its torque is linear in
+    the standard inertial parameters (the link channel's read ``lag`` late where the sensors'
+    timing is fitted), the rows' sigma carries the inertia it adds (the acceleration noise's
+    share), and the standard parameters are a polynomial in the payload's
+    (:func:`~serpar.diagnosis.arm_dynamics_payload.standard_jacobian`)."""
+    models, t = family._models, family.terms
+    link, drive, link_band, band, sigma_link, sigma_drive = misfit
+    d_phi = standard_jacobian(np.asarray(params["payload"], float), models.flange)
+    d_link = models.payload_link[rows]
+    if "sensor_timing" in params:
+        d_link = d_link - float(params["sensor_timing"][0]) * models.payload_link_rate[rows]
+    d_drive = models.payload_drive[rows]
+    # sigma^2 = measured + sum_m (M + added)_jm^2 acc_var_m (+ a tare's variance): its change
+    added = models.added_inertia(params, rows)
+    d_added = models.payload_mass[rows]  # rows x n x n x 10
+    out = {}
+    for name, e, b, sigma, d_model, mass in (
+            ("link", link, link_band, sigma_link, d_link, t.mass_link[rows]),
+            ("drive", drive, band, sigma_drive, d_drive, t.mass_full[rows])):
+        g = np.sign(e) * np.maximum(np.abs(e) - b, 0.0)
+        d_sigma = np.einsum("rjm,m,rjmk->rjk", mass + added, t.acc_var, d_added) / sigma[..., None]
+        outside = (np.abs(e) > b).astype(float)
+        d_r = (-outside[..., None] * d_model - (g / sigma)[..., None] * d_sigma) / sigma[..., None]
+        out[name] = d_r @ d_phi  # rows x n x 10
+    cols = np.concatenate([out[b] for b in family._blocks], axis=1)
+    return cols.reshape(-1, cols.shape[-1])
+
+
 def residual_jacobian(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArray[np.int64],
                       skip: Collection[str] = ()) -> Vec:
     """Columns in the mapping's block order (each block's parameters in its order), the blocks
@@ -200,6 +234,9 @@ def residual_jacobian(family: _ArmFamily, params: Mapping[str, Vec], rows: NDArr
         values = np.asarray(values, float)
         if family.baseline is not None and name == family.baseline.name:
             cols.append(tare_columns(family, params, rows).toarray())
+            continue
+        if name == "payload":
+            cols.append(payload_columns(family, params, rows, misfit))
             continue
         exact = (_exact(family, params, rows, name, misfit)
                  if name in EXACT or name.startswith("coupled_pair") else None)

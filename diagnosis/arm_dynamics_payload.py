@@ -124,3 +124,39 @@ class PayloadRegressor:
         inv = np.linalg.inv(np.array(phis).T)  # columns: the bodies' parameter vectors
         return cls(np.stack(link, axis=2) @ inv, np.stack(drive, axis=2) @ inv,
                    np.stack(rate, axis=2) @ inv, np.stack(mass, axis=3) @ inv)
+
+
+def _entries(m: Vec) -> Vec:
+    """A symmetric 3 x 3 (x k) as its xx, yy, zz, xy, xz, yz entries."""
+    return np.stack([m[0, 0], m[1, 1], m[2, 2], m[0, 1], m[0, 2], m[1, 2]])
+
+
+def standard_jacobian(p: Vec, flange: Vec = PANDA_FLANGE) -> Vec:
+    """10 x 10: d :func:`standard_parameters` (:func:`payload_inertial` (p)) / d p, analytic
+    (the map is a polynomial of degree three: mass times the extent's square, mass times the
+    CoM's square)."""
+    m, d, ext = float(p[0]), np.asarray(p[1:4], float), np.asarray(p[4:10], float)
+    c = np.asarray(flange, float) + d
+    eye = np.eye(3)
+    rows, cols = np.tril_indices(3)
+    # EXTENT's order: Lxx, Lyx, Lyy, Lzx, Lzy, Lzz = the lower triangle row by row
+    low = np.zeros((3, 3))
+    low[rows, cols] = ext
+    gram = low @ low.T
+    out = np.zeros((10, 10))
+    # by the mass
+    out[0, 0] = 1.0
+    out[1:4, 0] = c
+    out[4:, 0] = _entries(np.trace(gram) * eye - gram + (c @ c) * eye - np.outer(c, c))
+    # by the CoM offset
+    for k in range(3):
+        e = eye[k]
+        out[1 + k, 1 + k] = m
+        out[4:, 1 + k] = _entries(m * (2.0 * c[k] * eye - np.outer(e, c) - np.outer(c, e)))
+    # by the extent: S = m L L^T, inertia about the CoM tr(S) 1 - S
+    for a, (i, j) in enumerate(zip(rows, cols)):
+        unit = np.zeros((3, 3))
+        unit[i, j] = 1.0
+        ds = m * (unit @ low.T + low @ unit.T)
+        out[4:, 4 + a] = _entries(np.trace(ds) * eye - ds)
+    return out

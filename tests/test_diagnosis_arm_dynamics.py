@@ -74,9 +74,10 @@ def single_fits(effect: str | None):
 def test_the_jacobian_is_the_fits_own_differences_with_exact_tares() -> None:
     """The family's Jacobian (diagnosis/arm_dynamics_jacobian.py) against scipy's 2-point
     differences of its residual: the non-linear effects' columns equal, the tares', the
-    linear effects' (exact: friction through its stiction band, rotor inertia) and the sigmoid
-    friction's and the Stribeck fall's (analytic) within the differences' own error; a wrong sign or a dropped
-    stiction band would be ~100 % off."""
+    linear effects' (exact: friction through its stiction band, rotor inertia), the sigmoid
+    friction's, the Stribeck fall's and the payload's (analytic, the payload's through the
+    rows' sigma too) within the differences' own error; a wrong sign or a dropped stiction band
+    would be ~100 % off."""
     from scipy.optimize._numdiff import approx_derivative
 
     _, _, fam, train, _, _ = twin("joint_friction")
@@ -101,7 +102,13 @@ def test_the_jacobian_is_the_fits_own_differences_with_exact_tares() -> None:
     want = approx_derivative(fun, np.concatenate(list(params.values())), method="2-point")
     got = fam.jacobian(params, train)
     n_exact = (sizes[fam.baseline.name] + sizes["joint_friction"] + sizes["armature"]
-               + sizes["sigmoid_friction"] + sizes["stribeck_friction"])
+               + sizes["sigmoid_friction"] + sizes["stribeck_friction"] + sizes["payload"])
+    # the payload's torque is cubic in its parameters: 2-point differences are ~1e-6 off it,
+    # central ones ~1e-9 (measured)
+    x = np.concatenate(list(params.values()))
+    first = n_exact - sizes["payload"]
+    want[:, first:n_exact] = approx_derivative(
+        lambda p: fun(np.r_[x[:first], p, x[n_exact:]]), x[first:n_exact], method="3-point")
     np.testing.assert_array_equal(got[:, n_exact:], want[:, n_exact:])
     scale = np.abs(want[:, :n_exact]).max(axis=0)
     assert np.all(np.abs(got[:, :n_exact] - want[:, :n_exact]).max(axis=0) < 1e-6 * scale)

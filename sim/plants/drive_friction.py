@@ -18,7 +18,9 @@ Fc + dFs exp(-(v / vs)^2) at the speed of each substep's start, so the solver ho
 at rest up to Fs = Fc + dFs and lets it slide at the Coulomb level once it moves. As an
 explicit torque it would need a smoothed sign whose slope at rest (dFs / width, hundreds of
 N m s/rad) drives the arm against the pads' stiff grip on a 1.7 g conductor: the cell's
-grasps blew up so. (The arm-dynamics twin, which grips nothing, keeps the smoothed torque:
+grasps blew up so (while the hand still squeezed at once; not tried again since it closes at its
+own speed, controllers/gripper_servo.py). (The arm-dynamics twin, which grips nothing, keeps the
+smoothed torque:
 :func:`stribeck_fall_torque`.)
 """
 
