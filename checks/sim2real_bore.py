@@ -14,6 +14,7 @@ from serpar.checks.background_rerun import BackgroundRerun
 from serpar.checks.sim2real import (
     MU_RANGE,
     NOMINAL_MU,
+    OutcomeDiff,
     RealEpisode,
     Tick,
     outcomes_of,
@@ -30,34 +31,41 @@ MU_STEP_UP, MU_STEP_DOWN = 0.25, 0.1
 cells' range: 0.1-0.5)."""
 
 
+def push_difference(real: list[HoleOutcome], sim: list[HoleOutcome]) -> OutcomeDiff:
+    """The cell's in-bore push minus the simulator's, paired per hole, with its 95 % CI."""
+    by_hole = {(h.cycle, h.hole): h.bore_axial for h in sim if h.bore_axial is not None}
+    return paired([h.bore_axial[0] - by_hole[(h.cycle, h.hole)][0] for h in real
+                   if h.bore_axial is not None and (h.cycle, h.hole) in by_hole])
+
+
+def _second_mu(push: float, mu0: float) -> float:
+    """The mu to rerun at where the cell pushes harder (``push`` > 0) or less than ``mu0``."""
+    return mu0 + (MU_STEP_UP if push > 0 else -min(MU_STEP_DOWN, mu0 - MU_RANGE[0]))
+
+
 def bore_rerun_mu(real: list[HoleOutcome], sim: list[HoleOutcome], mu0: float
                   ) -> tuple[float | None, str]:
     """The second mu to rerun the holes at for the bore's friction, or None with why not: the
     real in-bore push against the simulator's at ``mu0``, paired per hole; where it agrees
     within its 95 % CI there is nothing to fit and no rerun is spent."""
-    by_hole = {(h.cycle, h.hole): h.bore_axial for h in sim if h.bore_axial is not None}
-    d = paired([h.bore_axial[0] - by_hole[(h.cycle, h.hole)][0] for h in real
-                if h.bore_axial is not None and (h.cycle, h.hole) in by_hole])
+    d = push_difference(real, sim)
     if d.diff is None or d.ci is None:
         return None, (f"{d.n} seated insertion(s) with an in-bore travel in both the cell and "
                       "the simulator; 2 needed")
     if abs(d.diff) <= d.ci:
         return None, (f"the in-bore push agrees with the simulator's at mu {mu0:.3g} "
                       f"({d.diff:+.3g} ± {d.ci:.2g} N over {d.n} holes): nothing to fit")
-    step = MU_STEP_UP if d.diff > 0 else -min(MU_STEP_DOWN, mu0 - MU_RANGE[0])
-    return mu0 + step, ""
+    return _second_mu(d.diff, mu0), ""
 
 
 def bore_guess(real: list[HoleOutcome], nominal: list[HoleOutcome], mu0: float) -> float | None:
     """The second mu :func:`bore_rerun_mu` would take if the diagnosed simulator's in-bore push
     differs from the cell's in the direction the nominal's does (None without 2 holes to tell
     by): what a rerun started ahead of need, beside the updated one, runs at."""
-    by_hole = {(h.cycle, h.hole): h.bore_axial for h in nominal if h.bore_axial is not None}
-    d = paired([h.bore_axial[0] - by_hole[(h.cycle, h.hole)][0] for h in real
-                if h.bore_axial is not None and (h.cycle, h.hole) in by_hole])
+    d = push_difference(real, nominal)
     if d.diff is None or d.ci is None or d.diff == 0.0:
         return None
-    return mu0 + (MU_STEP_UP if d.diff > 0 else -min(MU_STEP_DOWN, mu0 - MU_RANGE[0]))
+    return _second_mu(d.diff, mu0)
 
 
 def updated_rerun(episodes: list[RealEpisode], real: list[HoleOutcome], model: dict[str, object],
